@@ -1,0 +1,1 @@
+"""Alembic migrations of the photoshape_flow metadata schema (one linear history)."""

@@ -1,0 +1,41 @@
+"""The `photoshape` command line: one module per verb, each with a `register(app)` function.
+
+Verb modules import heavy libraries (Mitsuba, torch, Prefect) inside their commands so that
+`photoshape --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+
+import typer
+
+app = typer.Typer(
+    name="photoshape",
+    help="Photorealistic, relightable materials for 3D shape collections (PhotoShape, SIGGRAPH Asia 2018).",
+    no_args_is_help=True,
+    add_completion=True,
+    pretty_exceptions_show_locals=False,
+)
+
+# Order is the order of `photoshape --help`.
+VERB_MODULES: tuple[str, ...] = (
+    "demo", "ingest", "run", "status", "eval", "export", "gallery", "retrieve", "grade",
+    "serve", "db", "doctor", "gc",
+)
+
+
+def _register_verbs() -> None:
+    for name in VERB_MODULES:
+        module_name = f"{__name__}.{name}_cmd"
+        if importlib.util.find_spec(module_name) is None:
+            continue
+        importlib.import_module(module_name).register(app)
+
+
+_register_verbs()
+
+
+def main() -> None:
+    app()

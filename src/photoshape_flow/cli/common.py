@@ -1,0 +1,24 @@
+"""Helpers shared by the CLI verbs: console, one-line errors, settings/store/session access."""
+
+from __future__ import annotations
+
+from typing import NoReturn
+
+import typer
+from rich.console import Console
+
+console = Console()
+err_console = Console(stderr=True)
+
+
+def fail(message: str, code: int = 1) -> NoReturn:
+    """Print a one-line error and exit non-zero."""
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+    raise typer.Exit(code)
+
+
+def get_store():  # type: ignore[no-untyped-def]
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.store import BlobStore
+
+    return BlobStore(get_settings().blob_root)

@@ -1,0 +1,94 @@
+"""Settings from PHOTOSHAPE_* environment variables, a .env file, or defaults.
+
+Nothing else in the package reads the environment for configuration: every path, URL and knob
+comes through `Settings`, so a deployment is described by its environment alone.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Runtime configuration of photoshape_flow."""
+
+    model_config = SettingsConfigDict(env_prefix="PHOTOSHAPE_", env_file=".env", extra="ignore")
+
+    data_root: Path = Field(
+        default=Path("./photoshape-data"),
+        description="Folder holding the blob store, the default SQLite database and generated data.",
+    )
+    database_url: str | None = Field(
+        default=None,
+        description="SQLAlchemy URL of the metadata database; default: SQLite file under data_root. "
+        "PostgreSQL: postgresql+psycopg://user@host:5432/db",
+    )
+    render_variant: str = Field(
+        default="llvm_ad_rgb",
+        description="Mitsuba variant. The pip wheel has no llvm_rgb; llvm_ad_rgb costs nothing extra "
+        "unless gradients are enabled. scalar_rgb works without LLVM but is ~170x slower for AOVs.",
+    )
+    render_threads: int = Field(
+        default=0,
+        description="Dr.Jit worker threads; 0 = all cores. Values below 2 are raised to 2 because "
+        "Mitsuba deadlocks loading an envmap with a single worker thread.",
+    )
+    torch_threads: int = Field(default=0, description="torch intra-op threads; 0 = all cores.")
+    device: Literal["auto", "cpu", "cuda"] = Field(
+        default="auto", description="Device for the networks: cuda when available under auto."
+    )
+    seed: int = Field(default=0, description="Global seed; every item's seed derives from it and its key.")
+    claim_lease_seconds: int = Field(
+        default=900, description="How long a worker's claim on a batch lasts before another may take it."
+    )
+    gc_grace_seconds: int = Field(
+        default=3600,
+        description="gc keeps unreferenced blobs younger than this (they may belong to a write in flight).",
+    )
+    prefect_api_url: str | None = Field(
+        default=None,
+        description="Prefect API URL for events and deployments (falls back to PREFECT_API_URL).",
+    )
+
+    @field_validator("database_url")
+    @classmethod
+    def _normalise_url(cls, value: str | None) -> str | None:
+        """Accept the common postgres:// spellings and route them to psycopg 3."""
+        if value is None or value == "":
+            return None
+        for prefix in ("postgres://", "postgresql://"):
+            if value.startswith(prefix):
+                return "postgresql+psycopg://" + value[len(prefix) :]
+        return value
+
+    @property
+    def resolved_database_url(self) -> str:
+        """The database URL in effect: the configured one or SQLite under the data root."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_root / 'photoshape.db').resolve()}"
+
+    @property
+    def blob_root(self) -> Path:
+        return self.data_root / "blobs"
+
+    @property
+    def effective_render_threads(self) -> int:
+        wanted = self.render_threads or (os.cpu_count() or 2)
+        return max(2, wanted)
+
+    @property
+    def effective_prefect_api_url(self) -> str | None:
+        return self.prefect_api_url or os.environ.get("PREFECT_API_URL") or None
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    """The process-wide settings (cached; call `get_settings.cache_clear()` after changing env)."""
+    return Settings()
