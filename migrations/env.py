@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from alembic import context
-from sqlalchemy import engine_from_config, pool
 
 from photoshape_flow.db import models  # noqa: F401  (registers every table on the metadata)
 from photoshape_flow.db.base import Base
+from photoshape_flow.db.session import make_engine
 from photoshape_flow.db.views import CANDIDATE_VIEW
 
 config = context.config
@@ -34,11 +34,13 @@ def run_migrations_offline() -> None:
 def run_migrations_online() -> None:
     connectable = config.attributes.get("connection")
     if connectable is None:
-        connectable = engine_from_config(
-            config.get_section(config.config_ini_section, {}), prefix="sqlalchemy.", poolclass=pool.NullPool
-        )
-        with connectable.connect() as connection:
-            _run(connection)
+        # make_engine creates the SQLite file's folder and applies the same pragmas as the pipeline.
+        engine = make_engine(config.get_main_option("sqlalchemy.url"))
+        try:
+            with engine.connect() as connection:
+                _run(connection)
+        finally:
+            engine.dispose()
     else:
         _run(connectable)
 

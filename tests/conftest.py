@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -52,3 +58,106 @@ def store(settings_env: Path):  # type: ignore[no-untyped-def]
     from photoshape_flow.store import BlobStore
 
     return BlobStore(get_settings().blob_root)
+
+
+# --- PostgreSQL --------------------------------------------------------------------------------
+# The python-svc machines run a server at 127.0.0.1:5432 (trust auth). Where none answers, a
+# throwaway cluster is started for the session. With CI=true a missing database fails the run: the
+# PostgreSQL tests never silently skip there.
+
+
+PG_ADMIN_URL = os.environ.get("PHOTOSHAPE_TEST_PG_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/postgres")
+
+
+def _pg_answers(url: str) -> bool:
+    import sqlalchemy as sa
+
+    try:
+        engine = sa.create_engine(url, connect_args={"connect_timeout": 3})
+        with engine.connect() as conn:
+            conn.execute(sa.text("SELECT 1"))
+        engine.dispose()
+        return True
+    except Exception:
+        return False
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start_throwaway_cluster() -> tuple[str, list[str], str]:
+    """initdb + pg_ctl start on a free port; returns (admin url, stop command, data dir)."""
+    bins = sorted(Path("/usr/lib/postgresql").glob("*/bin/initdb"))
+    if not bins:
+        raise RuntimeError("no PostgreSQL binaries under /usr/lib/postgresql (apt-get install -y postgresql)")
+    bindir = bins[-1].parent
+    datadir = tempfile.mkdtemp(prefix="photoshape-pg-")
+    run_as: list[str] = []
+    if os.geteuid() == 0:  # initdb refuses to run as root
+        shutil.chown(datadir, "postgres", "postgres")
+        run_as = ["runuser", "-u", "postgres", "--"]
+    port = _free_port()
+    subprocess.run([*run_as, str(bindir / "initdb"), "-D", datadir, "-U", "postgres", "--auth=trust", "-E", "UTF8"],
+                   check=True, capture_output=True)
+    opts = f"-c listen_addresses=127.0.0.1 -p {port} -k /tmp -c fsync=off -c synchronous_commit=off"
+    subprocess.run([*run_as, str(bindir / "pg_ctl"), "-D", datadir, "-l", f"{datadir}/log", "-w", "-o", opts, "start"],
+                   check=True, capture_output=True)
+    stop = [*run_as, str(bindir / "pg_ctl"), "-D", datadir, "-m", "immediate", "stop"]
+    return f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres", stop, datadir
+
+
+@pytest.fixture(scope="session")
+def pg_admin_url() -> Iterator[str]:
+    """URL of a PostgreSQL maintenance database we may create databases in."""
+    if _pg_answers(PG_ADMIN_URL):
+        yield PG_ADMIN_URL
+        return
+    try:
+        url, stop, datadir = _start_throwaway_cluster()
+    except Exception as exc:
+        message = f"no PostgreSQL at {PG_ADMIN_URL} and no throwaway cluster: {exc}"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+    try:
+        yield url
+    finally:
+        subprocess.run(stop, capture_output=True)
+        shutil.rmtree(datadir, ignore_errors=True)
+
+
+@pytest.fixture
+def pg_url(pg_admin_url: str) -> Iterator[str]:
+    """A fresh, empty PostgreSQL database for one test, dropped afterwards."""
+    import sqlalchemy as sa
+
+    name = f"photoshape_test_{uuid.uuid4().hex[:12]}"
+    admin = sa.create_engine(pg_admin_url, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(sa.text(f'CREATE DATABASE "{name}"'))
+    url = pg_admin_url.rsplit("/", 1)[0] + f"/{name}"
+    try:
+        yield url
+    finally:
+        from photoshape_flow.db.session import get_engine
+
+        for engine_url in [url]:
+            try:
+                get_engine(engine_url).dispose()
+            except Exception:
+                pass
+        get_engine.cache_clear()
+        with admin.connect() as conn:
+            conn.execute(sa.text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def any_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """An empty database URL on SQLite and on PostgreSQL (the test runs once for each)."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'any.db'}"
+    return request.getfixturevalue("pg_url")

@@ -49,6 +49,29 @@ def sha256_file(path: str | os.PathLike[str], chunk: int = 1 << 20) -> str:
     return digest.hexdigest()
 
 
+def _mitsuba():  # type: ignore[no-untyped-def]
+    """Mitsuba's Bitmap reads/writes OpenEXR (the pip OpenCV wheels are built without it)."""
+    import mitsuba as mi
+
+    if mi.variant() is None:
+        mi.set_variant("scalar_rgb")  # any variant has Bitmap; the renderer switches to its own later
+    return mi
+
+
+def _encode_exr(array: np.ndarray) -> bytes:
+    """Half-float OpenEXR bytes of an (H, W[, C]) float image."""
+    mi = _mitsuba()
+    stream = mi.MemoryStream()
+    mi.Bitmap(np.ascontiguousarray(array, dtype=np.float16)).write(stream, mi.Bitmap.FileFormat.OpenEXR)
+    stream.seek(0)
+    return bytes(stream.read(stream.size()))
+
+
+def _decode_exr(path: Path) -> np.ndarray:
+    mi = _mitsuba()
+    return np.array(mi.Bitmap(str(path)), dtype=np.float32)
+
+
 @dataclass(frozen=True)
 class GcReport:
     scanned: int
@@ -113,7 +136,7 @@ class BlobStore:
         return self.put_bytes(buffer.getvalue(), "npy")
 
     def put_image(self, image: np.ndarray, ext: str = "png", quality: int = 95) -> str:
-        """Store an 8- or 16-bit image (H, W[, C]) as PNG/JPEG/WebP, or float32 as .exr/.hdr."""
+        """Store an 8- or 16-bit image (H, W[, C]) as PNG/JPEG/WebP, or a float image as half-float .exr or .hdr."""
         import cv2
 
         ext = ext.lower().lstrip(".")
@@ -127,7 +150,9 @@ class BlobStore:
             params = [cv2.IMWRITE_JPEG_QUALITY, quality]
         elif ext == "webp":
             params = [cv2.IMWRITE_WEBP_QUALITY, quality]
-        elif ext in ("exr", "hdr"):
+        elif ext == "exr":
+            return self.put_bytes(_encode_exr(array), "exr")
+        elif ext == "hdr":
             channels = channels.astype(np.float32)
         ok, encoded = cv2.imencode(f".{ext}", np.ascontiguousarray(channels), params)
         if not ok:
@@ -150,9 +175,11 @@ class BlobStore:
         import cv2
 
         path = self.resolve(ref)
+        if path.suffix == ".exr":
+            return _decode_exr(path)
         if flags is None:
             flags = cv2.IMREAD_UNCHANGED
-            if path.suffix in (".exr", ".hdr"):
+            if path.suffix == ".hdr":
                 flags = cv2.IMREAD_ANYCOLOR | cv2.IMREAD_ANYDEPTH
         image = cv2.imread(str(path), flags)
         if image is None:

@@ -1,0 +1,25 @@
+# The two commands of the README: `make demo` (the whole pipeline on built-in demo data) and `make test`.
+VENV ?= .venv
+SIZE ?= small
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test lint bench clean-demo
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	$(VENV)/bin/photoshape demo --size $(SIZE)
+
+test: setup
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/pytest $(PYTEST_ARGS)
+
+lint: setup
+	$(VENV)/bin/ruff check .
+
+bench: setup
+	$(VENV)/bin/python bench/render.py
+	$(VENV)/bin/python bench/retrieval.py
+	$(VENV)/bin/python bench/classifier.py
+	$(VENV)/bin/python bench/ingest.py

@@ -1,0 +1,66 @@
+"""`photoshape db upgrade | downgrade | current | heads | revision`: schema migrations."""
+
+from __future__ import annotations
+
+import typer
+
+from photoshape_flow.cli.common import console, fail
+
+db_app = typer.Typer(help="Migrate the metadata database (Alembic).", no_args_is_help=True)
+
+
+@db_app.command("upgrade")
+def upgrade(revision: str = typer.Argument("head", help="Target revision.")) -> None:
+    """Upgrade the database schema (creates the database file for SQLite)."""
+    from photoshape_flow.db import migrate
+
+    try:
+        migrate.upgrade(revision=revision)
+    except Exception as exc:  # surface connection errors as one line
+        fail(f"upgrade failed: {exc}")
+    console.print(f"database at revision [bold]{migrate.current_revision()}[/]")
+
+
+@db_app.command("downgrade")
+def downgrade(revision: str = typer.Argument("-1", help="Target revision, e.g. -1 or base.")) -> None:
+    """Downgrade the database schema."""
+    from photoshape_flow.db import migrate
+
+    migrate.downgrade(revision=revision)
+    console.print(f"database at revision [bold]{migrate.current_revision()}[/]")
+
+
+@db_app.command("current")
+def current() -> None:
+    """Show the database's revision and whether it is the head."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+
+    rev = migrate.current_revision()
+    heads = migrate.heads()
+    state = "up to date" if rev in heads else f"behind head {', '.join(heads)}"
+    console.print(f"{get_settings().resolved_database_url}: revision {rev} ({state})", highlight=False)
+
+
+@db_app.command("heads")
+def heads() -> None:
+    """Show the head revision(s) of the migration scripts (a linear history has one)."""
+    from photoshape_flow.db import migrate
+
+    for head in migrate.heads():
+        console.print(head)
+
+
+@db_app.command("revision")
+def revision(
+    message: str = typer.Option(..., "-m", "--message", help="What the migration changes."),
+    autogenerate: bool = typer.Option(True, help="Diff the models against the database."),
+) -> None:
+    """Create a new migration script in migrations/versions (developers)."""
+    from photoshape_flow.db import migrate
+
+    migrate.revision(message, autogenerate=autogenerate)
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(db_app, name="db")

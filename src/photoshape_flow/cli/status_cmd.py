@@ -1,0 +1,49 @@
+"""`photoshape status`: rows per table and progress per stage."""
+
+from __future__ import annotations
+
+import typer
+from rich.table import Table
+
+from photoshape_flow.cli.common import console, fail
+
+
+def status() -> None:
+    """Counts per table and per stage: done / pending / failed."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+    from photoshape_flow.db.session import session_scope
+    from photoshape_flow.pipeline.progress import stage_progress, table_counts
+
+    settings = get_settings()
+    try:
+        if not migrate.is_up_to_date():
+            fail(f"{settings.resolved_database_url}: not migrated; run `photoshape db upgrade`")
+    except typer.Exit:
+        raise
+    except Exception as exc:
+        fail(f"{settings.resolved_database_url}: cannot connect ({exc})")
+    with session_scope() as session:
+        stages = stage_progress(session)
+        tables = table_counts(session)
+    console.print(f"database: {settings.resolved_database_url}", highlight=False)
+    console.print(f"data root: {settings.data_root.resolve()}", highlight=False)
+    st = Table(title="stages")
+    for col in ("stage", "unit", "done", "pending", "failed"):
+        st.add_column(col, justify="left" if col in ("stage", "unit") else "right")
+    for p in stages:
+        st.add_row(p.stage, p.unit, str(p.done), str(p.pending), str(p.failed))
+    console.print(st)
+    tt = Table(title="tables")
+    tt.add_column("table")
+    tt.add_column("rows", justify="right")
+    tt.add_column("by status")
+    for name, counts in tables.items():
+        total = sum(counts.values())
+        detail = "" if set(counts) == {"rows"} else ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
+        tt.add_row(name, str(total), detail)
+    console.print(tt)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("status")(status)

@@ -1,0 +1,122 @@
+"""Per-stage progress (done / pending / failed) computed from the rows each stage records."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.db import models as m
+from photoshape_flow.vocab import STAGES
+
+
+@dataclass(frozen=True)
+class StageProgress:
+    stage: str
+    unit: str
+    done: int
+    pending: int
+    failed: int
+
+
+def _count(session: Session, query: sa.Select) -> int:
+    return int(session.execute(sa.select(sa.func.count()).select_from(query.subquery())).scalar_one())
+
+
+def _active_pairs() -> sa.Select:
+    return (
+        sa.select(m.Pair.id)
+        .join(m.Shape, m.Shape.id == m.Pair.shape_id)
+        .join(m.Exemplar, m.Exemplar.id == m.Pair.exemplar_id)
+        .where(~m.Pair.exclude, ~m.Shape.exclude, ~m.Exemplar.exclude)
+    )
+
+
+def stage_progress(session: Session) -> list[StageProgress]:
+    """Progress of every canonical stage, in pipeline order."""
+    out: dict[str, StageProgress] = {}
+
+    ok_items = failed_items = 0
+    for model in (m.Shape, m.Exemplar, m.Material, m.Envmap):
+        ok_items += _count(session, sa.select(model.id).where(model.status == "ok"))
+        failed_items += _count(session, sa.select(model.id).where(model.status != "ok"))
+    out["ingest"] = StageProgress("ingest", "items", ok_items, 0, failed_items)
+
+    shapes_ok = sa.select(m.Shape.id).where(m.Shape.status == "ok", ~m.Shape.exclude)
+    shapes_done = sa.select(m.ViewFeature.shape_id).where(m.ViewFeature.status == "ok")
+    shapes_failed = sa.select(m.ViewFeature.shape_id).where(m.ViewFeature.status != "ok")
+    exemplars_ok = sa.select(m.Exemplar.id).where(m.Exemplar.status == "ok", ~m.Exemplar.exclude)
+    ex_done = sa.select(m.ExemplarFeature.exemplar_id).where(m.ExemplarFeature.status == "ok")
+    ex_failed = sa.select(m.ExemplarFeature.exemplar_id).where(m.ExemplarFeature.status != "ok")
+    done = _count(session, shapes_ok.where(m.Shape.id.in_(shapes_done))) + _count(
+        session, exemplars_ok.where(m.Exemplar.id.in_(ex_done))
+    )
+    failed = _count(session, shapes_ok.where(m.Shape.id.in_(shapes_failed))) + _count(
+        session, exemplars_ok.where(m.Exemplar.id.in_(ex_failed))
+    )
+    total = _count(session, shapes_ok) + _count(session, exemplars_ok)
+    out["coarse-alignment"] = StageProgress(
+        "coarse-alignment", "shapes+exemplars", done, max(total - done - failed, 0), failed
+    )
+
+    pairs = _active_pairs()
+    aligned_ok = sa.select(m.Alignment.pair_id).where(m.Alignment.status == "ok")
+    aligned_failed = sa.select(m.Alignment.pair_id).where(m.Alignment.status != "ok")
+    n_pairs = _count(session, pairs)
+    done = _count(session, pairs.where(m.Pair.id.in_(aligned_ok)))
+    failed = _count(session, pairs.where(m.Pair.id.in_(aligned_failed), m.Pair.id.not_in(aligned_ok)))
+    out["fine-alignment"] = StageProgress("fine-alignment", "pairs", done, n_pairs - done - failed, failed)
+
+    with_substance = sa.select(m.PartSubstance.pair_id)
+    done = _count(session, pairs.where(m.Pair.id.in_(with_substance)))
+    pending = _count(session, pairs.where(m.Pair.id.in_(aligned_ok), m.Pair.id.not_in(with_substance)))
+    out["substances"] = StageProgress("substances", "pairs", done, pending, 0)
+
+    renders = sa.select(m.Rendering.id).where(m.Rendering.kind.in_(("bootstrap", "training")))
+    out["training-renders"] = StageProgress(
+        "training-renders",
+        "renderings",
+        _count(session, renders.where(m.Rendering.status == "ok")),
+        0,
+        _count(session, renders.where(m.Rendering.status != "ok")),
+    )
+
+    classifiers = sa.select(m.Classifier.id)
+    out["training"] = StageProgress(
+        "training",
+        "classifiers",
+        _count(session, classifiers.where(m.Classifier.status == "ok")),
+        _count(session, classifiers.where(m.Classifier.status == "training")),
+        _count(session, classifiers.where(m.Classifier.status == "failed")),
+    )
+
+    inferred = sa.select(m.Assignment.pair_id).where(m.Assignment.method == "classifier")
+    done = _count(session, pairs.where(m.Pair.id.in_(inferred)))
+    pending = _count(session, pairs.where(m.Pair.id.in_(with_substance), m.Pair.id.not_in(inferred)))
+    out["inference"] = StageProgress("inference", "pairs", done, pending, 0)
+
+    published = sa.select(m.Rendering.pair_id).where(m.Rendering.kind == "photoshape", m.Rendering.status == "ok")
+    publish_failed = sa.select(m.Rendering.pair_id).where(
+        m.Rendering.kind == "photoshape", m.Rendering.status != "ok"
+    )
+    done = _count(session, pairs.where(m.Pair.id.in_(published)))
+    failed = _count(session, pairs.where(m.Pair.id.in_(publish_failed), m.Pair.id.not_in(published)))
+    pending = _count(session, pairs.where(m.Pair.id.in_(inferred), m.Pair.id.not_in(published)))
+    out["publish"] = StageProgress("publish", "pairs", done, max(pending - failed, 0), failed)
+
+    return [out[name] for name in STAGES]
+
+
+def table_counts(session: Session) -> dict[str, dict[str, int]]:
+    """Rows per table, split by status where the table has one."""
+    result: dict[str, dict[str, int]] = {}
+    for model in m.ALL_TABLES:
+        table = model.__table__
+        if "status" in table.c:
+            rows = session.execute(sa.select(table.c.status, sa.func.count()).group_by(table.c.status)).all()
+            counts = {str(status): int(n) for status, n in rows}
+        else:
+            counts = {"rows": int(session.execute(sa.select(sa.func.count()).select_from(table)).scalar_one())}
+        result[table.name] = counts
+    return result

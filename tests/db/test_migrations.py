@@ -1,0 +1,49 @@
+"""The schema's migrations: one head, reversible with data present, in step with the models."""
+
+from __future__ import annotations
+
+import sqlalchemy as sa
+from alembic.autogenerate import compare_metadata
+from alembic.runtime.migration import MigrationContext
+from sqlalchemy.orm import Session
+
+from photoshape_flow.db import migrate
+from photoshape_flow.db.base import Base
+from photoshape_flow.db.session import make_engine
+from tests.db.seed import seed
+
+
+def test_single_head() -> None:
+    assert len(migrate.heads()) == 1
+
+
+def test_upgrade_downgrade_upgrade_with_rows(any_db_url: str) -> None:
+    migrate.upgrade(any_db_url)
+    engine = make_engine(any_db_url)
+    with Session(engine) as session, session.begin():
+        seed(session)
+    migrate.downgrade(any_db_url, "base")
+    with engine.connect() as conn:
+        assert "shape" not in sa.inspect(conn).get_table_names()
+    migrate.upgrade(any_db_url)
+    with Session(engine) as session, session.begin():
+        ids = seed(session, suffix="-2")
+    with engine.connect() as conn:
+        rows = conn.execute(
+            sa.text("SELECT part_name, material_name FROM photoshape_candidate WHERE pair_id = :p AND method = "
+                    "'classifier' ORDER BY part_index"),
+            {"p": ids["pair"]},
+        ).all()
+    assert [tuple(r) for r in rows] == [("legs", "oak-2"), ("seat", "leather-2")]
+    assert migrate.current_revision(any_db_url) == migrate.heads()[0]
+    engine.dispose()
+
+
+def test_models_and_migrations_agree(any_db_url: str) -> None:
+    migrate.upgrade(any_db_url)
+    engine = make_engine(any_db_url)
+    with engine.connect() as conn:
+        context = MigrationContext.configure(conn, opts={"compare_type": True})
+        diff = compare_metadata(context, Base.metadata)
+    engine.dispose()
+    assert diff == []
