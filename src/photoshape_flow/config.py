@@ -51,6 +51,21 @@ class Settings(BaseSettings):
         default=3600,
         description="gc keeps unreferenced blobs younger than this (they may belong to a write in flight).",
     )
+    dask_address: str | None = Field(
+        default=None,
+        description="Scheduler address of an existing Dask cluster; flows then fan batches out to its worker "
+        "processes (prefect-dask). The workers need PREFECT_API_URL of a real server.",
+    )
+    dask_workers: int = Field(
+        default=0,
+        description="Start a local Dask cluster with this many single-threaded worker processes for the flows' "
+        "fan-out (0: batches run one after another in the flow's process).",
+    )
+    ingest_max_faces: int = Field(default=500_000, description="Reject shapes with more triangles than this.")
+    ingest_max_file_mb: float = Field(default=100.0, description="Reject source files larger than this (MB).")
+    ingest_max_image_megapixels: float = Field(
+        default=64.0, description="Reject images larger than this (decompression-bomb guard)."
+    )
     prefect_api_url: str | None = Field(
         default=None,
         description="Prefect API URL for events and deployments (falls back to PREFECT_API_URL).",

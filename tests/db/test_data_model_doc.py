@@ -6,11 +6,11 @@ import re
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
+from tests.conftest import REPO_ROOT
+from tests.db.seed import seed
 
 from photoshape_flow.db import migrate
 from photoshape_flow.db.session import make_engine
-from tests.conftest import REPO_ROOT
-from tests.db.seed import seed
 
 
 def doc_queries() -> list[str]:

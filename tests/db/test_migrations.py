@@ -6,11 +6,11 @@ import sqlalchemy as sa
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
 from sqlalchemy.orm import Session
+from tests.db.seed import seed
 
 from photoshape_flow.db import migrate
 from photoshape_flow.db.base import Base
 from photoshape_flow.db.session import make_engine
-from tests.db.seed import seed
 
 
 def test_single_head() -> None:

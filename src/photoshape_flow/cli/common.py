@@ -17,6 +17,20 @@ def fail(message: str, code: int = 1) -> NoReturn:
     raise typer.Exit(code)
 
 
+def setup_logging(verbose: bool) -> None:
+    """Log pipeline steps to stderr (INFO with --verbose, otherwise warnings only)."""
+    import logging
+
+    from rich.logging import RichHandler
+
+    logging.basicConfig(
+        level=logging.INFO if verbose else logging.WARNING,
+        format="%(name)s: %(message)s",
+        handlers=[RichHandler(console=err_console, show_path=False)],
+        force=True,
+    )
+
+
 def get_store():  # type: ignore[no-untyped-def]
     from photoshape_flow.config import get_settings
     from photoshape_flow.store import BlobStore

@@ -1,1 +1,61 @@
-"""render"""
+"""Rendering with Mitsuba 3 (llvm variant): scenes as data, exact part maps, fast viewpoint sweeps.
+
+``from photoshape_flow.render import Camera, MaterialSpec, UVTransform, EnvmapSpec, Renderer``.
+`Camera` and the specs are plain data (importing them never loads Mitsuba); `Renderer` loads
+Mitsuba on first use, via `photoshape_flow.render.runtime.ensure_mitsuba`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.runtime import RendererUnavailableError, check_llvm
+from photoshape_flow.render.specs import (
+    EnvmapSpec,
+    MaterialSpec,
+    UVTransform,
+    linear_to_srgb,
+    material_from_builtin,
+    srgb_to_linear,
+    uv_matrix,
+)
+
+if TYPE_CHECKING:
+    from photoshape_flow.render.renderer import BeautyResult, Renderer, SweepResult
+    from photoshape_flow.render.scene import SceneOptions, build_scene
+
+_LAZY = {
+    "Renderer": "photoshape_flow.render.renderer",
+    "BeautyResult": "photoshape_flow.render.renderer",
+    "SweepResult": "photoshape_flow.render.renderer",
+    "build_scene": "photoshape_flow.render.scene",
+    "SceneOptions": "photoshape_flow.render.scene",
+}
+
+__all__ = [
+    "BeautyResult",
+    "Camera",
+    "EnvmapSpec",
+    "MaterialSpec",
+    "Renderer",
+    "RendererUnavailableError",
+    "SceneOptions",
+    "SweepResult",
+    "UVTransform",
+    "build_scene",
+    "check_llvm",
+    "linear_to_srgb",
+    "material_from_builtin",
+    "srgb_to_linear",
+    "uv_matrix",
+]
+
+
+def __getattr__(name: str) -> Any:
+    """Import the Mitsuba-backed modules only when they are used."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

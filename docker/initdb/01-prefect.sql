@@ -1,0 +1,2 @@
+-- The Prefect server keeps its own database next to photoshape's metadata database.
+CREATE DATABASE prefect OWNER photoshape;

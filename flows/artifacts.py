@@ -1,0 +1,77 @@
+"""UI artifacts of a run: a markdown summary, a table of candidates, progress of long stages."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import sqlalchemy as sa
+from prefect.artifacts import (
+    create_markdown_artifact,
+    create_progress_artifact,
+    create_table_artifact,
+    update_progress_artifact,
+)
+
+from photoshape_flow.config import get_settings
+from photoshape_flow.db.session import session_scope
+
+
+def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None) -> list[dict[str, Any]]:
+    """One row per PhotoShape candidate: pair, shape, exemplar, method, weakest and mean part score."""
+    query = """
+        SELECT pair_id, shape_id, exemplar_id, method_key, COUNT(*) AS parts,
+               MIN(score) AS weakest_part, AVG(score) AS mean_score, MIN(hog_distance) AS hog_distance,
+               MIN(alignment_iou) AS alignment_iou
+        FROM photoshape_candidate
+        WHERE method = 'classifier'
+        GROUP BY pair_id, shape_id, exemplar_id, method_key
+        ORDER BY mean_score DESC, pair_id
+    """
+    with session_scope(get_settings().resolved_database_url) as session:
+        rows = [dict(r._mapping) for r in session.execute(sa.text(query))]
+    if since_pair_ids is not None:
+        wanted = set(since_pair_ids)
+        rows = [r for r in rows if r["pair_id"] in wanted]
+    for r in rows:
+        for key in ("weakest_part", "mean_score", "hog_distance", "alignment_iou"):
+            if r[key] is not None:
+                r[key] = round(float(r[key]), 4)
+    return rows[:limit]
+
+
+def publish_candidates_table(key: str = "photoshape-candidates", rows: list[dict[str, Any]] | None = None) -> None:
+    rows = candidate_rows() if rows is None else rows
+    if rows:
+        create_table_artifact(table=rows, key=key, description="PhotoShape candidates of the classifier, best first")
+
+
+def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, Any] | None = None,
+                    key: str = "photoshape-run-summary") -> None:
+    """Markdown: per-stage wall time and the done/pending/failed counts of every stage."""
+    from photoshape_flow.pipeline.progress import stage_progress
+
+    with session_scope(get_settings().resolved_database_url) as session:
+        progress = stage_progress(session)
+    lines = [f"# {title}", "", "| stage | seconds | unit | done | pending | failed |", "|---|---:|---|---:|---:|---:|"]
+    for p in progress:
+        seconds = stage_times.get(p.stage)
+        shown = f"{seconds:.1f}" if seconds is not None else ""
+        lines.append(f"| {p.stage} | {shown} | {p.unit} | {p.done} | {p.pending} | {p.failed} |")
+    for name, value in (extra or {}).items():
+        lines += ["", f"**{name}**: {value}"]
+    create_markdown_artifact(markdown="\n".join(lines), key=key, description=title)
+
+
+class Progress:
+    """A progress artifact updated as batches finish."""
+
+    def __init__(self, stage: str, total: int):
+        self.total = max(total, 1)
+        self.done = 0
+        self.id = create_progress_artifact(progress=0.0, key=f"{stage}-progress",
+                                           description=f"{stage}: batches done")
+
+    def step(self) -> None:
+        self.done += 1
+        update_progress_artifact(self.id, progress=100.0 * self.done / self.total)

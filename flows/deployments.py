@@ -1,0 +1,89 @@
+"""Deployments from prefect.yaml, served by `photoshape serve` (one declaration, two ways to run it)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import importlib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from photoshape_flow.config import get_settings
+
+
+def prefect_yaml_path() -> Path:
+    """prefect.yaml of the checkout, or the copy shipped inside the package."""
+    here = Path(__file__).resolve()
+    for candidate in (here.parents[1] / "prefect.yaml", here.parent / "prefect.yaml"):
+        if candidate.is_file():
+            return candidate
+    raise FileNotFoundError("prefect.yaml not found next to the flows")
+
+
+def load_declarations(path: Path | None = None) -> list[dict[str, Any]]:
+    data = yaml.safe_load((path or prefect_yaml_path()).read_text())
+    return list(data.get("deployments") or [])
+
+
+def load_flow(entrypoint: str) -> Any:
+    """`package.module.flow_name` (Prefect's module-path entrypoint) -> the flow object."""
+    module_name, _, attr = entrypoint.replace(":", ".").rpartition(".")
+    return getattr(importlib.import_module(module_name), attr)
+
+
+def _trigger(spec: dict[str, Any]) -> Any:
+    from prefect.events.schemas.deployment_triggers import DeploymentEventTrigger
+
+    spec = dict(spec)
+    spec.pop("type", None)
+    for key in ("within", "schedule_after"):
+        if isinstance(spec.get(key), int | float):
+            spec[key] = dt.timedelta(seconds=spec[key])
+    return DeploymentEventTrigger(**spec)
+
+
+def _schedule(spec: dict[str, Any]) -> Any:
+    from prefect.schedules import Cron
+
+    return Cron(spec["cron"], timezone=spec.get("timezone", "UTC"), active=spec.get("active", True))
+
+
+def build_deployments(path: Path | None = None, names: Sequence[str] | None = None) -> list[Any]:
+    """RunnerDeployments for every deployment in prefect.yaml (or those in `names`)."""
+    from prefect.client.schemas.objects import ConcurrencyLimitConfig, ConcurrencyLimitStrategy
+    from prefect.deployments.runner import EntrypointType
+
+    out = []
+    for spec in load_declarations(path):
+        if names and spec["name"] not in names:
+            continue
+        limit = spec.get("concurrency_limit")
+        concurrency = None
+        if limit:
+            concurrency = ConcurrencyLimitConfig(
+                limit=limit["limit"],
+                collision_strategy=ConcurrencyLimitStrategy(limit.get("collision_strategy", "ENQUEUE")),
+            )
+        flow = load_flow(spec["entrypoint"])
+        out.append(flow.to_deployment(
+            name=spec["name"],
+            description=spec.get("description"),
+            tags=spec.get("tags"),
+            parameters=spec.get("parameters") or {},
+            schedules=[_schedule(s) for s in spec.get("schedules") or []] or None,
+            triggers=[_trigger(t) for t in spec.get("triggers") or []] or None,
+            concurrency_limit=concurrency,
+            entrypoint_type=EntrypointType.MODULE_PATH,
+        ))
+    return out
+
+
+def serve(names: Sequence[str] | None = None, limit: int | None = None) -> None:
+    """Serve the deployments in this process until interrupted (runs execute in subprocesses)."""
+    from prefect import serve as prefect_serve
+
+    if not get_settings().effective_prefect_api_url:
+        raise RuntimeError("no Prefect API: start `prefect server start` and set PREFECT_API_URL")
+    prefect_serve(*build_deployments(names=names), limit=limit)

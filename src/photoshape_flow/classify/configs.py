@@ -1,0 +1,150 @@
+"""Named training configurations of the material classifier.
+
+* ``tiny``: CI and unit tests. ResNet-18 at width 8 (same keys, 1/64 of the compute), 32 px, a few
+  steps. Learns colour-coded toy data; not a real classifier.
+* ``cpu``: the demo. ResNet-18 (full width) at 96 px, Adam 1e-3, 6 epochs of at most 30 batches of 32
+  (at most 5,760 region views: ~1.5 min on 2 idle cores, from the ~60-80 img/s that ResNet-18 at
+  96 px trains at there; bench/classifier.py measures it). Raise ``epochs`` / ``max_steps_per_epoch``
+  for the medium demo. Torch threads above the free cores are ruinous (OpenMP spinning: 20x slower
+  under load), so set ``PHOTOSHAPE_TORCH_THREADS`` when training shares the box. From scratch: no ImageNet
+  weights ship with the project, and SGD at the paper's 1e-4 barely moves a randomly initialised
+  network in that budget, hence Adam with a larger step. ``finetune_epochs`` is used when the
+  material set grew and training starts from the previous classifier.
+* ``paper``: section 5.2 as published. ResNet-34 at 224 px, SGD with a fixed learning rate of 1e-4,
+  momentum 0.9, weight decay 1e-4 (never on the log-variances), uncertainty-weighted loss with
+  s_m = 0, s_s = -1, about 100 epochs; ImageNet weights when `pretrained` names a torchvision
+  ``resnet34`` .pth file (the paper starts from ImageNet, then OpenSurfaces substance pretraining,
+  which is not reproduced). Meant for CUDA (`settings.device` = auto picks it when present); on the
+  2-core CPU one epoch over 10k regions is ~22 min.
+
+`get_config(name, **overrides)` returns a frozen dataclass; `config_hash` is the part of the
+classifier's params_hash that depends on the configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from photoshape_flow.classify.augment import AugmentConfig
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    name: str
+    arch: str = "resnet18"
+    width: int = 64
+    image_size: int = 96
+    batch_size: int = 32
+    epochs: int = 6
+    finetune_epochs: int = 2
+    max_steps_per_epoch: int | None = None  # cap on batches per epoch (a random subset when data is larger)
+    optimizer: str = "sgd"  # sgd | adam
+    lr: float = 1e-4
+    momentum: float = 0.9
+    weight_decay: float = 1e-4
+    loss_mode: str = "uncertainty"  # uncertainty | fixed
+    material_weight: float = 1.0
+    substance_weight: float = 1.0  # 0 disables the substance task
+    init_log_var_material: float = 0.0
+    init_log_var_substance: float = -1.0
+    pretrained: str | None = None  # torchvision-format ImageNet .pth (RGB filters of conv1 + backbone)
+    min_region_fraction: float = 0.005
+    background_every: int = 4  # one background example per n renderings (0: none)
+    val_fraction: float = 0.1  # held out by key hash when no rendering has split "val"
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+    eval_batch_size: int = 64
+    num_workers: int = 0
+    channels_last: bool = False
+    seed: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        data = dataclasses.asdict(self)
+        data["augment"] = dataclasses.asdict(self.augment)
+        return json.loads(json.dumps(data))  # tuples -> lists: a plain-JSON dict
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ClassifierConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        values = {k: v for k, v in data.items() if k in known}
+        aug = dict(values.get("augment") or {})
+        for key in ("crop_scale", "aspect_ratio"):
+            if key in aug:
+                aug[key] = tuple(aug[key])
+        values["augment"] = AugmentConfig(**aug)
+        return cls(**values)
+
+    def replace(self, **changes: Any) -> ClassifierConfig:
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def architecture(self) -> str:
+        return self.arch if self.width == 64 else f"{self.arch}-w{self.width}"
+
+
+CONFIGS: dict[str, ClassifierConfig] = {
+    "tiny": ClassifierConfig(
+        name="tiny",
+        arch="resnet18",
+        width=8,
+        image_size=32,
+        batch_size=8,
+        epochs=2,
+        finetune_epochs=1,
+        max_steps_per_epoch=3,
+        optimizer="adam",
+        lr=3e-3,
+        weight_decay=0.0,
+        background_every=0,
+        augment=AugmentConfig(rotation_deg=5.0, crop_scale=(0.7, 1.0)),
+        eval_batch_size=32,
+    ),
+    "cpu": ClassifierConfig(
+        name="cpu",
+        arch="resnet18",
+        width=64,
+        image_size=96,
+        batch_size=32,
+        epochs=6,
+        finetune_epochs=2,
+        max_steps_per_epoch=30,
+        optimizer="adam",
+        lr=1e-3,
+        weight_decay=1e-4,
+        eval_batch_size=64,
+    ),
+    "paper": ClassifierConfig(
+        name="paper",
+        arch="resnet34",
+        width=64,
+        image_size=224,
+        batch_size=64,
+        epochs=100,
+        finetune_epochs=10,
+        optimizer="sgd",
+        lr=1e-4,
+        momentum=0.9,
+        weight_decay=1e-4,
+        eval_batch_size=128,
+        num_workers=4,
+        channels_last=True,
+    ),
+}
+
+
+def get_config(name: str = "cpu", **overrides: Any) -> ClassifierConfig:
+    """A named configuration, with fields overridden (e.g. ``pretrained="resnet34.pth"``)."""
+    if name not in CONFIGS:
+        raise ValueError(f"unknown classifier config {name!r}; expected one of {sorted(CONFIGS)}")
+    return CONFIGS[name].replace(**overrides) if overrides else CONFIGS[name]
+
+
+def config_hash(config: ClassifierConfig) -> str:
+    """sha256 of the configuration fields that change the trained model."""
+    data = config.to_dict()
+    for key in ("eval_batch_size", "num_workers"):  # do not change the result
+        data.pop(key, None)
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()

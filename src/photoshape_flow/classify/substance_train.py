@@ -1,0 +1,381 @@
+"""Training and inference of the substance segmentation network (pure: arrays in, checkpoints out).
+
+Data: bootstrap renders (sRGB on white) with their per-pixel `substance_ids` labels. Augmentation per
+sample: random square crop covering `crop_scale` of the area, resized to `size`; horizontal flip;
+colour jitter (brightness, contrast, saturation). Loss: per-pixel cross-entropy with class weights
+~ frequency^-1/2 (the white background dominates the pixels). AdamW with a cosine learning-rate
+schedule computed from the global iteration, so a resumed run follows the same schedule.
+
+Resumability: `train_substance_net` calls `on_epoch(checkpoint, metrics)` after every epoch; the
+checkpoint dict (model, optimiser, epoch, config, metrics, history) round-trips through
+`checkpoint_to_bytes` / `checkpoint_from_bytes`. Passing it back as `checkpoint=` continues with the
+next epoch; the random streams are seeded per (seed, epoch), so an interrupted and resumed run draws
+the same batches as an uninterrupted one. The pipeline stores checkpoints in the blob store and the
+Classifier row; this module knows nothing of either.
+
+Presets (`get_config`): "tiny" (CI: a few iterations at 32 px), "cpu" (the demo: 128 px, 30 epochs;
+~75 img/s on 2 idle cores, so ~2.5 min for 400 bootstrap renders), "gpu" (192 px, width 32, 60
+epochs, batch 64; the device always comes from settings.device, "auto" picks cuda when present).
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from photoshape_flow.classify.substance_net import ARCHITECTURE, NUM_CLASSES, SubstanceNet
+from photoshape_flow.vocab import SUBSTANCE_LABELS
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SubstanceTrainConfig:
+    preset: str = "cpu"
+    size: int = 128
+    width: int = 16
+    epochs: int = 30
+    batch_size: int = 16
+    iters_per_epoch: int | None = None  # None: one pass over the training images
+    lr: float = 2e-3
+    min_lr_fraction: float = 0.05
+    weight_decay: float = 1e-4
+    crop_scale: tuple[float, float] = (0.55, 1.0)
+    flip: bool = True
+    jitter: float = 0.25
+    class_balance: bool = True
+    seed: int = 0
+    device: str = "cpu"
+
+    @property
+    def architecture(self) -> str:
+        return f"{ARCHITECTURE}-w{self.width}"
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["crop_scale"] = list(self.crop_scale)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SubstanceTrainConfig:
+        values = dict(data)
+        if "crop_scale" in values:
+            values["crop_scale"] = tuple(values["crop_scale"])
+        known = set(cls.__dataclass_fields__)
+        return cls(**{k: v for k, v in values.items() if k in known})
+
+
+PRESETS: dict[str, SubstanceTrainConfig] = {
+    "tiny": SubstanceTrainConfig(preset="tiny", size=32, width=8, epochs=2, batch_size=4, iters_per_epoch=3),
+    "cpu": SubstanceTrainConfig(preset="cpu", size=128, width=16, epochs=30, batch_size=16),
+    "gpu": SubstanceTrainConfig(preset="gpu", size=192, width=32, epochs=60, batch_size=64, lr=3e-3, device="cuda"),
+}
+
+
+def get_config(name: str, **overrides: Any) -> SubstanceTrainConfig:
+    """A preset by name with field overrides (e.g. device resolved from settings)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown substance training preset {name!r}; choose from {sorted(PRESETS)}")
+    return replace(PRESETS[name], **overrides)
+
+
+def resolve_device(setting: str) -> str:
+    """settings.device -> a torch device string ("auto": cuda when available)."""
+    if setting == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise RuntimeError("settings.device is 'cuda' but torch sees no CUDA device")
+    return setting
+
+
+@dataclass
+class SubstanceData:
+    """Images (H, W, 3) uint8 and label maps (H, W) uint8 (SUBSTANCE_LABELS indices); sizes may vary."""
+
+    images: list[np.ndarray]
+    labels: list[np.ndarray]
+    keys: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if len(self.images) != len(self.labels):
+            raise ValueError("images and labels differ in number")
+        for image, label in zip(self.images, self.labels, strict=True):
+            if image.shape[:2] != label.shape:
+                raise ValueError(f"image {image.shape} and label map {label.shape} differ in size")
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+
+# -- augmentation -----------------------------------------------------------------------------------
+
+
+def _resize(array: np.ndarray, size: int, nearest: bool) -> np.ndarray:
+    import cv2
+
+    if array.shape[0] == size and array.shape[1] == size:
+        return array
+    shrink = array.shape[0] > size
+    interp = cv2.INTER_NEAREST if nearest else (cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    return cv2.resize(array, (size, size), interpolation=interp)
+
+
+def augment(
+    image: np.ndarray, label: np.ndarray, config: SubstanceTrainConfig, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random square crop + resize, flip, colour jitter; returns float32 (H, W, 3) in [0, 1] and labels."""
+    h, w = label.shape
+    side_max = min(h, w)
+    area = rng.uniform(*config.crop_scale)
+    side = int(np.clip(round(math.sqrt(area) * side_max), 4, side_max))
+    y0 = int(rng.integers(0, h - side + 1))
+    x0 = int(rng.integers(0, w - side + 1))
+    img = _resize(image[y0 : y0 + side, x0 : x0 + side], config.size, nearest=False)
+    lab = _resize(label[y0 : y0 + side, x0 : x0 + side], config.size, nearest=True)
+    if config.flip and rng.random() < 0.5:
+        img, lab = img[:, ::-1], lab[:, ::-1]
+    out = img.astype(np.float32) / 255.0
+    j = config.jitter
+    if j > 0:
+        out = out * rng.uniform(1 - j, 1 + j)
+        mean = out.mean()
+        out = (out - mean) * rng.uniform(1 - j, 1 + j) + mean
+        grey = out.mean(axis=2, keepdims=True)
+        out = grey + (out - grey) * rng.uniform(1 - j, 1 + j)
+    return np.clip(out, 0.0, 1.0), np.ascontiguousarray(lab)
+
+
+def _to_tensor(images: Sequence[np.ndarray]) -> torch.Tensor:
+    return torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2).contiguous().float()
+
+
+# -- checkpoints ------------------------------------------------------------------------------------
+
+
+def checkpoint_to_bytes(checkpoint: dict[str, Any]) -> bytes:
+    buffer = io.BytesIO()
+    torch.save(checkpoint, buffer)
+    return buffer.getvalue()
+
+
+def checkpoint_from_bytes(data: bytes) -> dict[str, Any]:
+    return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+
+
+def load_model(checkpoint: dict[str, Any], device: str = "cpu") -> SubstanceNet:
+    """The network of a checkpoint, in eval mode on `device`."""
+    config = SubstanceTrainConfig.from_dict(checkpoint["config"])
+    model = SubstanceNet(width=config.width)
+    model.load_state_dict(checkpoint["model"])
+    return model.to(device).eval()
+
+
+# -- metrics ----------------------------------------------------------------------------------------
+
+
+def confusion_matrix(pred: np.ndarray, target: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:
+    index = target.astype(np.int64).ravel() * num_classes + pred.astype(np.int64).ravel()
+    return np.bincount(index, minlength=num_classes * num_classes).reshape(num_classes, num_classes)
+
+
+def metrics_from_confusion(conf: np.ndarray) -> dict[str, Any]:
+    """Pixel accuracy (all and foreground), per-class IoU (None where a class is absent), mean IoU."""
+    conf = conf.astype(np.float64)
+    total = conf.sum()
+    tp = np.diag(conf)
+    iou: dict[str, float | None] = {}
+    for k, name in enumerate(SUBSTANCE_LABELS):
+        union = conf[k, :].sum() + conf[:, k].sum() - tp[k]
+        iou[name] = None if union == 0 else float(tp[k] / union)
+    defined = [v for v in iou.values() if v is not None]
+    fg_total = conf[1:, :].sum()
+    return {
+        "pixel_accuracy": float(tp.sum() / total) if total else None,
+        "foreground_accuracy": float(tp[1:].sum() / fg_total) if fg_total else None,
+        "iou": iou,
+        "mean_iou": float(np.mean(defined)) if defined else None,
+        "pixels": int(total),
+    }
+
+
+@torch.inference_mode()
+def evaluate(model: SubstanceNet, data: SubstanceData, size: int, batch_size: int = 16) -> dict[str, Any]:
+    """Metrics at the training resolution (images resized to size x size, labels nearest)."""
+    device = next(model.parameters()).device
+    was_training = model.training
+    model.eval()
+    conf = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
+    for start in range(0, len(data), batch_size):
+        imgs = [_resize(im, size, False).astype(np.float32) / 255.0 for im in data.images[start : start + batch_size]]
+        labs = [_resize(lb, size, True) for lb in data.labels[start : start + batch_size]]
+        pred = model(_to_tensor(imgs).to(device)).argmax(dim=1).cpu().numpy()
+        conf += confusion_matrix(pred, np.stack(labs))
+    model.train(was_training)
+    result = metrics_from_confusion(conf)
+    result["images"] = len(data)
+    return result
+
+
+# -- training ---------------------------------------------------------------------------------------
+
+
+def class_weights(data: SubstanceData) -> np.ndarray:
+    counts = np.zeros(NUM_CLASSES, np.float64)
+    for label in data.labels:
+        counts += np.bincount(label.ravel(), minlength=NUM_CLASSES)[:NUM_CLASSES]
+    freq = counts / max(counts.sum(), 1.0)
+    weights = np.where(counts > 0, (freq + 1e-6) ** -0.5, 0.0)
+    present = weights > 0
+    if present.any():
+        weights[present] /= (weights[present] * freq[present]).sum() / freq[present].sum()
+    weights[~present] = 1.0
+    return weights.astype(np.float32)
+
+
+@dataclass
+class TrainResult:
+    model: SubstanceNet
+    checkpoint: dict[str, Any]
+    epochs_run: list[int]
+    history: list[dict[str, Any]]
+
+
+def _lr_at(config: SubstanceTrainConfig, iteration: int, total: int) -> float:
+    progress = min(1.0, iteration / max(1, total))
+    floor = config.min_lr_fraction
+    return config.lr * (floor + (1 - floor) * 0.5 * (1 + math.cos(math.pi * progress)))
+
+
+def train_substance_net(
+    train: SubstanceData,
+    val: SubstanceData | None,
+    config: SubstanceTrainConfig,
+    *,
+    checkpoint: dict[str, Any] | None = None,
+    on_epoch: Callable[[dict[str, Any], dict[str, Any]], None] | None = None,
+) -> TrainResult:
+    """Train (or resume from `checkpoint`) up to `config.epochs`; returns the final model and checkpoint.
+
+    Metrics after each epoch are on `val` (the validation split, by shapes and envmaps) when given,
+    else on `train` (flagged ``"split": "train"``).
+    """
+    if len(train) == 0:
+        raise ValueError("no training images for the substance network")
+    device = torch.device(config.device)
+    torch.manual_seed(config.seed)
+    model = SubstanceNet(width=config.width).to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    start_epoch = 1
+    history: list[dict[str, Any]] = []
+    weights = class_weights(train) if config.class_balance else np.ones(NUM_CLASSES, np.float32)
+    if checkpoint is not None:
+        model.load_state_dict(checkpoint["model"])
+        optimizer.load_state_dict(checkpoint["optimizer"])
+        start_epoch = int(checkpoint["epoch"]) + 1
+        history = list(checkpoint.get("history", []))
+        weights = np.asarray(checkpoint.get("class_weights", weights), np.float32)
+    weight_t = torch.from_numpy(weights).to(device)
+    iters = config.iters_per_epoch or max(1, math.ceil(len(train) / config.batch_size))
+    total_iters = iters * config.epochs
+    epochs_run: list[int] = []
+    last = checkpoint
+    for epoch in range(start_epoch, config.epochs + 1):
+        model.train()
+        rng = np.random.default_rng([config.seed, epoch])
+        torch.manual_seed(config.seed * 100_003 + epoch)
+        order = rng.permutation(len(train))
+        losses: list[float] = []
+        started = time.perf_counter()
+        seen = 0
+        for it in range(iters):
+            idx = [int(order[(it * config.batch_size + k) % len(order)]) for k in range(config.batch_size)]
+            pairs = [augment(train.images[i], train.labels[i], config, rng) for i in idx]
+            x = _to_tensor([p[0] for p in pairs]).to(device)
+            y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64)).to(device)
+            for group in optimizer.param_groups:
+                group["lr"] = _lr_at(config, (epoch - 1) * iters + it, total_iters)
+            loss = F.cross_entropy(model(x), y, weight=weight_t)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            losses.append(float(loss.detach()))
+            seen += len(idx)
+        seconds = time.perf_counter() - started
+        eval_data = val if val is not None and len(val) else train
+        metrics = evaluate(model, eval_data, config.size, batch_size=config.batch_size)
+        metrics.update(
+            {
+                "split": "val" if eval_data is val else "train",
+                "epoch": epoch,
+                "loss": float(np.mean(losses)),
+                "loss_first": losses[0],
+                "loss_last": losses[-1],
+                "train_images_per_second": seen / seconds if seconds > 0 else None,
+                "train_seconds": seconds,
+            }
+        )
+        history.append({k: metrics[k] for k in ("epoch", "loss", "pixel_accuracy", "mean_iou")})
+        log.info(
+            "substance net epoch %d/%d: loss %.4f, %s pixel accuracy %.3f, mIoU %s, %.1f img/s",
+            epoch, config.epochs, metrics["loss"], metrics["split"], metrics["pixel_accuracy"] or 0.0,
+            metrics["mean_iou"], metrics["train_images_per_second"] or 0.0,
+        )
+        last = {
+            "model": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+            "optimizer": optimizer.state_dict(),
+            "epoch": epoch,
+            "config": config.to_dict(),
+            "architecture": config.architecture,
+            "labels": list(SUBSTANCE_LABELS),
+            "class_weights": weights.tolist(),
+            "metrics": metrics,
+            "history": history,
+        }
+        epochs_run.append(epoch)
+        if on_epoch is not None:
+            on_epoch(last, metrics)
+    if last is None:
+        raise ValueError("nothing to train: config.epochs is 0")
+    return TrainResult(model=model.eval(), checkpoint=last, epochs_run=epochs_run, history=history)
+
+
+@torch.inference_mode()
+def predict_substances(model: SubstanceNet, image_rgb: np.ndarray, size: int) -> np.ndarray:
+    """Per-pixel substance probabilities (6, H, W) float32 at the image's own resolution.
+
+    The image (H, W, 3; uint8, uint16 or float in [0, 1]) is resized to size x size for the network and the
+    softmax is resized back bilinearly (a convex combination, so each pixel still sums to 1).
+    """
+    image = np.asarray(image_rgb)
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    image = image[..., :3]
+    h, w = image.shape[:2]
+    if image.dtype == np.uint8:
+        as_float = image.astype(np.float32) / 255.0
+    elif image.dtype == np.uint16:
+        as_float = image.astype(np.float32) / 65535.0
+    else:
+        as_float = np.clip(image.astype(np.float32), 0.0, 1.0)
+    import cv2
+
+    interp = cv2.INTER_AREA if min(h, w) > size else cv2.INTER_LINEAR
+    resized = cv2.resize(as_float, (size, size), interpolation=interp)
+    device = next(model.parameters()).device
+    was_training = model.training
+    model.eval()
+    logits = model(_to_tensor([resized]).to(device))
+    model.train(was_training)
+    probs = torch.softmax(logits, dim=1)
+    if (h, w) != (size, size):
+        probs = F.interpolate(probs, size=(h, w), mode="bilinear", align_corners=False)
+    return probs[0].cpu().numpy().astype(np.float32)

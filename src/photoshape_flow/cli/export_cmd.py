@@ -1,0 +1,54 @@
+"""`photoshape export`: write the downloads of PhotoShapes (GLB, Mitsuba XML, OBJ, assignment.json)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from photoshape_flow.cli.common import console, fail
+
+
+def export(
+    pair_ids: list[int] = typer.Argument(None, help="Pair ids to export (default: every candidate of the method)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Folder; each PhotoShape goes into <pair>-<method_key>/."),
+    method: str = typer.Option(
+        "classifier", "--method", "-m",
+        help="classifier (each pair's newest classifier), builtin, no-classifier, color-match, or an exact "
+        "method key such as classifier:3.",
+    ),
+    formats: str = typer.Option("glb,xml,obj", "--format", "-f", help="Comma-separated: glb, gltf, xml, obj."),
+    size: int = typer.Option(512, min=8, help="Film size written into the Mitsuba XML."),
+    spp: int = typer.Option(128, min=1, help="Samples per pixel written into the Mitsuba XML."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""
+    from photoshape_flow.export.bundle import parse_formats
+    from photoshape_flow.pipeline.publish import export_candidates
+
+    try:
+        chosen = parse_formats(formats)
+    except ValueError as exc:
+        fail(str(exc))
+    results = export_candidates(out, pair_ids or None, method, chosen, size=size, spp=spp)
+    if not results:
+        fail(f"no candidates for method {method!r}: run inference first (photoshape run inference)")
+    if as_json:
+        console.print_json(json.dumps(results))
+    else:
+        table = Table(title=f"exports in {out}")
+        for column in ("pair", "method key", "status", "files / error"):
+            table.add_column(column)
+        for r in results:
+            detail = ", ".join(sorted(r["files"])) if r["status"] == "ok" else r["error"]
+            table.add_row(str(r["pair_id"]), str(r["method_key"] or ""), r["status"], detail)
+        console.print(table)
+    failed = [r for r in results if r["status"] != "ok"]
+    if failed:
+        raise typer.Exit(1)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("export")(export)

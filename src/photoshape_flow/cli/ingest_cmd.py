@@ -1,0 +1,198 @@
+"""`photoshape ingest shapes|exemplars|materials|envmaps PATH...`: bring the four collections in.
+
+Each command shows a progress bar and ends with a summary (added / already present / replaced /
+rejected) and one line per rejected input naming the file and the reason. Rejections do not make
+the command fail unless `--strict` is given (exit code 2).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from photoshape_flow.cli.common import console, err_console, fail
+
+ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps.", no_args_is_help=True)
+
+PathsArg = typer.Argument(..., help="Files or folders (searched recursively).", show_default=False)
+
+
+def _setup_logging(verbose: bool) -> None:
+    package = logging.getLogger("photoshape_flow")
+    if verbose:
+        from rich.logging import RichHandler
+
+        if not any(isinstance(h, RichHandler) for h in package.handlers):
+            package.addHandler(RichHandler(console=err_console, show_path=False))
+        package.setLevel(logging.INFO)
+    elif not logging.getLogger().handlers and not package.handlers:
+        # the summary prints every rejection; keep logging's last-resort handler from repeating them
+        package.addHandler(logging.NullHandler())
+
+
+def _check_database() -> None:
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+
+    url = get_settings().resolved_database_url
+    try:
+        ok = migrate.is_up_to_date()
+    except Exception as exc:
+        fail(f"{url}: cannot connect ({exc})")
+    if not ok:
+        fail(f"{url}: not migrated; run `photoshape db upgrade`")
+
+
+@contextmanager
+def _progress(title: str) -> Iterator[Callable[[str, int, int], None]]:
+    bar = Progress(
+        TextColumn(f"[bold]{title}[/]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        TextColumn("{task.description}"), console=console, transient=True,
+    )
+    task = bar.add_task("", total=None)
+
+    def update(label: str, done: int, total: int) -> None:
+        bar.update(task, completed=done, total=total, description=Path(label).name[:50])
+
+    with bar:
+        yield update
+
+
+def print_summary(summary: Any, strict: bool = False) -> None:
+    """The summary table plus one line per rejection (and warnings), then the exit code."""
+    table = Table(title=f"ingest {summary.kind}", show_header=True)
+    for column in ("added", "already present", "replaced", "rejected"):
+        table.add_column(column, justify="right")
+    table.add_row(str(len(summary.added)), str(len(summary.present)), str(len(summary.replaced)),
+                  str(len(summary.rejected)))
+    console.print(table)
+    if summary.duplicates:
+        console.print(f"{len(summary.duplicates)} duplicates marked (excluded): "
+                      + ", ".join(f"{a} -> {b}" for a, b in summary.duplicates[:20]), highlight=False)
+    for label, message in summary.warnings:
+        console.print(f"[yellow]warning[/] {label}: {message}", highlight=False)
+    for label, reason in summary.skipped:
+        console.print(f"[dim]skipped[/] {label}: {reason}", highlight=False)
+    for label, reason in summary.rejected:
+        err_console.print(f"[red]rejected[/] {label}: {reason}", highlight=False)
+    if strict and summary.rejected:
+        raise typer.Exit(2)
+
+
+@ingest_app.command("shapes")
+def shapes(
+    paths: list[Path] = PathsArg,
+    source: str | None = typer.Option(None, help="Source name (default: local, shapenet or sweethome3d)."),
+    category: str | None = typer.Option(
+        None, help="Catalogs/ShapeNet: keep these categories (comma-separated, e.g. chair,sofa). "
+        "Plain files: the category to record."),
+    name_filter: str | None = typer.Option(None, "--name-filter", help="Regular expression on names/ids/tags."),
+    split: str | None = typer.Option(None, help="Force 'train' or 'val' (default: hash-based 90/10)."),
+    license: str | None = typer.Option(None, "--license", help="Licence to record (catalogs bring their own)."),
+    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    max_faces: int = typer.Option(500_000, help="Reject shapes with more triangles."),
+    max_file_mb: float = typer.Option(100.0, help="Reject model files larger than this (MiB)."),
+    timeout: float = typer.Option(600.0, help="Seconds per shape before the importer is killed."),
+    isolate: bool = typer.Option(True, help="Parse in a child process (a crashing importer costs one item)."),
+    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+) -> None:
+    """OBJ+MTL, glTF/GLB, ShapeNetCore v2 trees and Sweet Home 3D catalogs (.sh3f)."""
+    from photoshape_flow.pipeline.ingest import IngestLimits, ingest_shapes
+
+    _setup_logging(verbose)
+    _check_database()
+    if split not in (None, "train", "val"):
+        fail(f"--split must be train or val, not {split!r}")
+    limits = IngestLimits(max_faces=max_faces, max_shape_bytes=int(max_file_mb * 1024 * 1024), timeout_s=timeout)
+    try:
+        with _progress("shapes") as progress:
+            summary = ingest_shapes(paths, source=source, category=category, name_filter=name_filter, split=split,
+                                    license=license, attribution=attribution, limits=limits, isolate=isolate,
+                                    progress=progress)
+    except ValueError as exc:
+        fail(str(exc))
+    print_summary(summary, strict)
+
+
+@ingest_app.command("exemplars")
+def exemplars(
+    paths: list[Path] = PathsArg,
+    source: str | None = typer.Option(None, help="Source name (default: local)."),
+    category: str | None = typer.Option(None, help="Category to record (e.g. chair)."),
+    size: int = typer.Option(512, help="Side of the stored square crop (paper: 1000; never upscaled)."),
+    license: str | None = typer.Option(None, "--license", help="Licence to record."),
+    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    source_url: str | None = typer.Option(None, help="Where the photos came from."),
+    max_megapixels: float = typer.Option(64.0, help="Reject images with more pixels (decompression bombs)."),
+    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+) -> None:
+    """Product photos on white (JPEG/PNG/WebP): mask, square crop, resize, dedupe."""
+    from photoshape_flow.pipeline.ingest import IngestLimits, ingest_exemplars
+
+    _setup_logging(verbose)
+    _check_database()
+    if size < 16:
+        fail("--size must be at least 16")
+    limits = IngestLimits(max_image_pixels=int(max_megapixels * 1_000_000))
+    with _progress("exemplars") as progress:
+        summary = ingest_exemplars(paths, source=source, category=category, size=size, license=license,
+                                   attribution=attribution, source_url=source_url, limits=limits, progress=progress)
+    print_summary(summary, strict)
+
+
+@ingest_app.command("materials")
+def materials(
+    paths: list[Path] = PathsArg,
+    substance: str | None = typer.Option(None, help="Substance when neither sidecar nor folder name says."),
+    source: str | None = typer.Option(None, help="Source name to record (sidecars take precedence)."),
+    license: str | None = typer.Option(None, "--license", help="Licence to record (sidecars take precedence)."),
+    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    previews: bool = typer.Option(True, help="Render sphere previews when the renderer is available."),
+    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+) -> None:
+    """SVBRDF folders (maps recognised by name + material.json/.toml) and analytic materials."""
+    from photoshape_flow.pipeline.ingest import ingest_materials
+
+    _setup_logging(verbose)
+    _check_database()
+    with _progress("materials") as progress:
+        summary = ingest_materials(paths, substance=substance, source=source, license=license,
+                                   attribution=attribution, previews=previews, progress=progress)
+    print_summary(summary, strict)
+
+
+@ingest_app.command("envmaps")
+def envmaps(
+    paths: list[Path] = PathsArg,
+    split: str | None = typer.Option(None, help="Force 'train' or 'val' (default: hash-based, ~10% val)."),
+    license: str | None = typer.Option(None, "--license", help="Licence to record."),
+    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    source_url: str | None = typer.Option(None, help="Where the maps came from."),
+    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+) -> None:
+    """Equirectangular HDR environment maps (.hdr, .exr)."""
+    from photoshape_flow.pipeline.ingest import ingest_envmaps
+
+    _setup_logging(verbose)
+    _check_database()
+    if split not in (None, "train", "val"):
+        fail(f"--split must be train or val, not {split!r}")
+    with _progress("envmaps") as progress:
+        summary = ingest_envmaps(paths, split=split, license=license, attribution=attribution,
+                                 source_url=source_url, progress=progress)
+    print_summary(summary, strict)
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(ingest_app, name="ingest")

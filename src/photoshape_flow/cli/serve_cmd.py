@@ -1,0 +1,38 @@
+"""`photoshape serve`: serve the deployments of prefect.yaml against a Prefect server."""
+
+from __future__ import annotations
+
+import typer
+
+from photoshape_flow.cli.common import console, fail
+
+
+def serve(
+    names: list[str] = typer.Argument(None, help="Deployments to serve (default: all in prefect.yaml)."),
+    limit: int | None = typer.Option(None, help="Maximum concurrent flow runs of this server process."),
+    list_only: bool = typer.Option(False, "--list", help="Print the deployments and exit."),
+) -> None:
+    """Serve every deployment of prefect.yaml (schedules, the material-added trigger) until Ctrl-C.
+
+    Needs a Prefect server: `prefect server start` (SQLite) or with
+    PREFECT_SERVER_DATABASE_CONNECTION_URL=postgresql+asyncpg://..., and PREFECT_API_URL pointing at it.
+    """
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.flows.deployments import build_deployments, load_declarations
+    from photoshape_flow.flows.deployments import serve as serve_deployments
+
+    if list_only:
+        for spec in load_declarations():
+            if not names or spec["name"] in names:
+                console.print(f"{spec['name']:18} {spec['entrypoint']}", highlight=False)
+        return
+    if not get_settings().effective_prefect_api_url:
+        fail("no Prefect API configured: start `prefect server start` and export "
+             "PREFECT_API_URL=http://127.0.0.1:4200/api")
+    deployments = build_deployments(names=names or None)
+    console.print(f"serving {len(deployments)} deployments: {', '.join(d.name for d in deployments)}")
+    serve_deployments(names or None, limit=limit)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("serve")(serve)

@@ -1,0 +1,442 @@
+"""`generate_demo`: a complete, self-contained input collection with ground truth, from a seed.
+
+Writes <out_dir>/
+    shapes/<id>.obj + .mtl          the shape collection (ingest input)
+    materials/<name>/               SVBRDF folders with material.json (ingest input)
+    envmaps/<name>.hdr              studio environment maps (ingest input)
+    exemplars/<stem>.jpg            photo-like exemplars (ingest input)
+    groundtruth.json                what evaluation compares against (see `groundtruth`)
+    groundtruth/masks/<stem>.png    part-index masks in the exemplars' native frame
+    groundtruth/shapes/             held-out shapes seen only in exemplars
+    groundtruth/envmaps/            held-out studios used only for exemplars
+
+Deterministic in (size, seed) and idempotent: files whose bytes would not change are left alone and
+an exemplar whose inputs hash the same as the recorded one is not rendered again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from photoshape_flow.demo.envmaps import StudioSpec, studio_specs, write_studio
+from photoshape_flow.demo.exemplars import (
+    ExemplarPlan,
+    assign_materials,
+    degrade,
+    encode_jpeg,
+    encode_mask,
+    sample_camera,
+    sample_degradation,
+)
+from photoshape_flow.demo.furniture import KIND_WEIGHTS, KINDS, Furniture, generate_furniture, perturb_design
+from photoshape_flow.demo.groundtruth import GROUNDTRUTH_VERSION
+from photoshape_flow.demo.materials import MAP_CHANNELS, MaterialRecipe, select_recipes, write_material
+from photoshape_flow.demo.obj import mtl_text, obj_text
+from photoshape_flow.demo.seeding import child_rng
+from photoshape_flow.demo.writing import write_bytes, write_text
+from photoshape_flow.vocab import SUBSTANCES
+
+log = logging.getLogger(__name__)
+
+GENERATOR_VERSION = "1"
+DemoSize = Literal["tiny", "small", "medium"]
+# First shapes cycle through the kinds so even tiny collections are varied.
+KIND_CYCLE: tuple[str, ...] = ("chair", "office_chair", "sofa", "stool", "armchair", "bench")
+
+
+@dataclass(frozen=True)
+class SizePreset:
+    shapes: int
+    heldout_shapes: int
+    per_substance: int
+    envmaps: int
+    heldout_envmaps: int
+    exemplars: int
+    exemplar_size: int
+    spp: int
+    texture_resolution: int = 512
+    envmap_width: int = 512
+
+
+SIZES: dict[str, SizePreset] = {
+    "tiny": SizePreset(
+        shapes=5,
+        heldout_shapes=2,
+        per_substance=2,
+        envmaps=3,
+        heldout_envmaps=2,
+        exemplars=6,
+        exemplar_size=144,
+        spp=24,
+        envmap_width=256,
+    ),
+    "small": SizePreset(
+        shapes=12,
+        heldout_shapes=4,
+        per_substance=3,
+        envmaps=4,
+        heldout_envmaps=2,
+        exemplars=20,
+        exemplar_size=256,
+        spp=48,
+    ),
+    "medium": SizePreset(
+        shapes=72,
+        heldout_shapes=16,
+        per_substance=6,
+        envmaps=8,
+        heldout_envmaps=4,
+        exemplars=200,
+        exemplar_size=320,
+        spp=48,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class DemoManifest:
+    """What `generate_demo` wrote (absolute paths) and how long each stage took."""
+
+    root: Path
+    size: str
+    seed: int
+    shapes: tuple[Path, ...]
+    materials: tuple[Path, ...]
+    envmaps: tuple[Path, ...]
+    exemplars: tuple[Path, ...]
+    groundtruth: Path
+    rendered: int = 0  # exemplars rendered by this call (the rest were up to date)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+# -- collections ----------------------------------------------------------------------------------
+
+
+def collection_shapes(seed: int, count: int) -> list[Furniture]:
+    """The shape collection: shape_0000.. (kinds cycle first, then follow KIND_WEIGHTS)."""
+    shapes = []
+    weights = np.asarray(KIND_WEIGHTS) / sum(KIND_WEIGHTS)
+    for k in range(count):
+        rng = child_rng(seed, "shape", k)
+        kind = KIND_CYCLE[k] if k < len(KIND_CYCLE) else KINDS[int(rng.choice(len(KINDS), p=weights))]
+        shapes.append(generate_furniture(rng, f"shape_{k:04d}", kind=kind))
+    return shapes
+
+
+def heldout_shapes(seed: int, count: int, collection: list[Furniture]) -> list[tuple[Furniture, str]]:
+    """Shapes only exemplars show: each a perturbed copy of a collection shape (returned with its id)."""
+    out = []
+    for k in range(count):
+        rng = child_rng(seed, "heldout-shape", k)
+        parent = collection[(k * 7 + int(rng.integers(len(collection)))) % len(collection)]
+        design = perturb_design(rng, parent.design)
+        out.append((generate_furniture(rng, f"heldout_{k:04d}", design=design), parent.source_id))
+    return out
+
+
+def _sha(data: bytes | str) -> str:
+    return hashlib.sha256(data.encode() if isinstance(data, str) else data).hexdigest()
+
+
+def _write_shape(folder: Path, furniture: Furniture) -> tuple[Path, str]:
+    stem = furniture.source_id
+    text = obj_text(furniture, f"{stem}.mtl")
+    write_text(folder / f"{stem}.mtl", mtl_text(furniture))
+    write_text(folder / f"{stem}.obj", text)
+    return folder / f"{stem}.obj", _sha(text)
+
+
+def _shape_entry(furniture: Furniture, path: str, in_collection: bool, similar_to: str | None) -> dict[str, Any]:
+    return {
+        "kind": furniture.kind,
+        "in_collection": in_collection,
+        "path": path,
+        "segmentation": furniture.segmentation,
+        "similar_to": similar_to,
+        "parts": [{"index": i, "name": p.name, "roles": p.roles} for i, p in enumerate(furniture.parts, start=1)],
+    }
+
+
+# -- exemplar planning ----------------------------------------------------------------------------
+
+
+def plan_exemplars(
+    seed: int,
+    preset: SizePreset,
+    collection: list[Furniture],
+    heldout: list[tuple[Furniture, str]],
+    recipes: list[MaterialRecipe],
+    studios: list[StudioSpec],
+) -> list[ExemplarPlan]:
+    """Which shape, materials, camera, light and degradation each exemplar gets.
+
+    Two in five exemplars show a held-out shape (retrieval can only find a similar one); the others
+    show a collection shape. Material assignments never repeat for the same shape.
+    """
+    by_substance: dict[str, list[MaterialRecipe]] = {s: [r for r in recipes if r.substance == s] for s in SUBSTANCES}
+    order = child_rng(seed, "exemplar-order").permutation(len(collection))
+    used: set[tuple] = set()
+    plans = []
+    n_coll = n_held = 0
+    for k in range(preset.exemplars):
+        rng = child_rng(seed, "exemplar", k)
+        if heldout and k % 5 in (1, 3):
+            furniture, similar_to = heldout[n_held % len(heldout)]
+            in_collection = False
+            n_held += 1
+        else:
+            furniture, similar_to = collection[int(order[n_coll % len(collection)])], None
+            in_collection = True
+            n_coll += 1
+        vertices = np.concatenate([c.piece.vertices for p in furniture.parts for c in p.components])
+        camera = sample_camera(rng, vertices)
+        for _ in range(50):
+            assignment = assign_materials(rng, furniture, by_substance)
+            key = (furniture.source_id, tuple(sorted((n, r.name) for n, r in assignment.items())))
+            if key not in used:
+                break
+        used.add(key)
+        studio = studios[int(rng.integers(len(studios)))]
+        plans.append(
+            ExemplarPlan(
+                stem=f"ex_{k:04d}",
+                shape_id=furniture.source_id,
+                in_collection=in_collection,
+                similar_to=similar_to,
+                camera=camera,
+                materials={n: r.name for n, r in assignment.items()},
+                substances={n: r.substance for n, r in assignment.items()},
+                envmap={
+                    "name": studio.name,
+                    "rotation": round(float(rng.uniform(0, 2 * math.pi)), 6),
+                    "scale": round(float(rng.uniform(0.9, 1.2)), 4),
+                },
+                degradation=sample_degradation(rng),
+                size=preset.exemplar_size,
+                spp=preset.spp,
+                render_seed=int(rng.integers(0, 2**31 - 1)),
+            )
+        )
+    return plans
+
+
+def _material_spec(folder: Path, recipe: MaterialRecipe):
+    from photoshape_flow.render.specs import MaterialSpec
+
+    maps = {ch: folder / f"{ch}.png" for ch in ("albedo", "roughness", "metallic", "normal")}
+    return MaterialSpec(name=recipe.name, substance=recipe.substance, maps=maps, scale=recipe.scale)
+
+
+def render_exemplar(
+    renderer,
+    furniture: Furniture,
+    plan: ExemplarPlan,
+    material_dirs: dict[str, Path],
+    recipes: dict[str, MaterialRecipe],
+    envmap_path: Path,
+) -> tuple[bytes, np.ndarray]:
+    """(JPEG bytes, part-index mask) of one planned exemplar."""
+    from photoshape_flow.render.camera import Camera
+    from photoshape_flow.render.specs import EnvmapSpec
+
+    shape = furniture.to_shape_mesh()
+    camera = Camera.from_dict(plan.camera)
+    materials = [
+        _material_spec(material_dirs[plan.materials[p.name]], recipes[plan.materials[p.name]]) for p in shape.parts
+    ]
+    envmap = EnvmapSpec(envmap_path, scale=plan.envmap["scale"], rotation=plan.envmap["rotation"])
+    result = renderer.beauty(
+        shape, materials, camera, envmap, size=plan.size, spp=plan.spp, background="transparent", seed=plan.render_seed
+    )
+    image = degrade(result.hdr, result.alpha, plan.degradation)
+    mask = renderer.part_ids(shape, camera, size=plan.size)
+    return encode_jpeg(image, plan.degradation["jpeg_quality"]), mask
+
+
+# -- entry point ----------------------------------------------------------------------------------
+
+
+def generate_demo(
+    out_dir: Path,
+    size: DemoSize = "tiny",
+    seed: int = 0,
+    *,
+    renderer=None,
+    preset: SizePreset | None = None,
+) -> DemoManifest:
+    """Generate (or bring up to date) the demo collection of `size` in `out_dir`; see module docstring.
+
+    `renderer`: a `photoshape_flow.render.Renderer` to reuse (one is created when exemplars need
+    rendering and none is given). `preset`: custom counts instead of SIZES[size] (tests, experiments).
+    """
+    if size not in SIZES:
+        raise ValueError(f"unknown demo size {size!r}; expected one of {sorted(SIZES)}")
+    preset = preset or SIZES[size]
+    if preset.shapes < 1 or preset.per_substance < 1 or preset.envmaps < 1 or preset.heldout_envmaps < 1:
+        raise ValueError(f"demo preset needs at least one shape, material per substance and envmap: {preset}")
+    root = Path(out_dir).resolve()
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+
+    collection = collection_shapes(seed, preset.shapes)
+    heldout = heldout_shapes(seed, preset.heldout_shapes, collection)
+    shape_paths, shape_hash, shapes_json = [], {}, {}
+    for f in collection:
+        path, digest = _write_shape(root / "shapes", f)
+        shape_paths.append(path)
+        shape_hash[f.source_id] = digest
+        shapes_json[f.source_id] = _shape_entry(f, f"shapes/{f.source_id}.obj", True, None)
+    for f, parent in heldout:
+        _, digest = _write_shape(root / "groundtruth" / "shapes", f)
+        shape_hash[f.source_id] = digest
+        shapes_json[f.source_id] = _shape_entry(f, f"groundtruth/shapes/{f.source_id}.obj", False, parent)
+    timings["shapes"] = time.perf_counter() - t0
+
+    gt_path = root / "groundtruth.json"
+    previous_gt: dict[str, Any] = {}
+    if gt_path.is_file():
+        try:
+            previous_gt = json.loads(gt_path.read_text())
+        except (OSError, json.JSONDecodeError):
+            previous_gt = {}
+    old_stamps: dict[str, str] = previous_gt.get("stamps", {}) if isinstance(previous_gt, dict) else {}
+    stamps: dict[str, str] = {}
+
+    def fresh(rel: str, stamp: str, files: list[str]) -> bool:
+        """True when `rel` was generated from the same inputs and its files are all still there."""
+        stamps[rel] = stamp
+        return old_stamps.get(rel) == stamp and all((root / rel / f if f else root / rel).is_file() for f in files)
+
+    t = time.perf_counter()
+    recipes = select_recipes(preset.per_substance)
+    material_dirs = {}
+    for r in recipes:
+        rel = f"materials/{r.name}"
+        stamp = _sha(json.dumps([asdict(r), seed, preset.texture_resolution, GENERATOR_VERSION], sort_keys=True))
+        if not fresh(rel, stamp, [f"{ch}.png" for ch in MAP_CHANNELS] + ["material.json"]):
+            write_material(root / rel, r, seed, preset.texture_resolution)
+        material_dirs[r.name] = root / rel
+    timings["materials"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    studios = studio_specs(seed, preset.envmaps, "studio")
+    held_studios = studio_specs(seed, preset.heldout_envmaps, "heldout")
+    envmap_paths: list[Path] = []
+    held_paths: dict[str, Path] = {}
+    for folder, specs in (("envmaps", studios), ("groundtruth/envmaps", held_studios)):
+        for spec in specs:
+            rel = f"{folder}/{spec.name}.hdr"
+            stamp = _sha(json.dumps([spec.to_json(), preset.envmap_width, GENERATOR_VERSION], sort_keys=True))
+            if not fresh(rel, stamp, [""]):
+                write_studio(root / rel, spec, preset.envmap_width)
+            if folder == "envmaps":
+                envmap_paths.append(root / rel)
+            else:
+                held_paths[spec.name] = root / rel
+    timings["envmaps"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    previous: dict[str, Any] = previous_gt.get("exemplars", {}) if isinstance(previous_gt, dict) else {}
+    furniture_by_id = {f.source_id: f for f in collection} | {f.source_id: f for f, _ in heldout}
+    recipe_by_name = {r.name: r for r in recipes}
+    plans = plan_exemplars(seed, preset, collection, heldout, recipes, held_studios)
+    exemplars_json: dict[str, Any] = {}
+    exemplar_paths = []
+    rendered = 0
+    for plan in plans:
+        furniture = furniture_by_id[plan.shape_id]
+        spec_hash = _sha(
+            json.dumps(
+                {
+                    "plan": asdict(plan),
+                    "shape": shape_hash[plan.shape_id],
+                    "version": GENERATOR_VERSION,
+                    "textures": preset.texture_resolution,
+                    "envmap_width": preset.envmap_width,
+                    "seed": seed,
+                },
+                sort_keys=True,
+            )
+        )
+        image_rel, mask_rel = f"exemplars/{plan.stem}.jpg", f"groundtruth/masks/{plan.stem}.png"
+        old = previous.get(plan.stem, {})
+        up_to_date = (
+            old.get("spec_hash") == spec_hash
+            and (root / image_rel).is_file()
+            and (root / mask_rel).is_file()
+            and "visible_parts" in old
+        )
+        if up_to_date:
+            visible = list(old["visible_parts"])
+        else:
+            if renderer is None:
+                from photoshape_flow.render import Renderer
+
+                renderer = Renderer()
+            jpeg, mask = render_exemplar(
+                renderer, furniture, plan, material_dirs, recipe_by_name, held_paths[plan.envmap["name"]]
+            )
+            write_bytes(root / image_rel, jpeg)
+            write_bytes(root / mask_rel, encode_mask(mask))
+            present = set(np.unique(mask).tolist())
+            visible = [p.name for i, p in enumerate(furniture.parts, start=1) if i in present]
+            rendered += 1
+            log.info("demo exemplar %s: %s (%d parts visible)", plan.stem, plan.shape_id, len(visible))
+        exemplar_paths.append(root / image_rel)
+        exemplars_json[plan.stem] = {
+            "image": image_rel,
+            "mask": mask_rel,
+            "size": plan.size,
+            "shape": plan.shape_id,
+            "in_collection": plan.in_collection,
+            "similar_to": plan.similar_to,
+            "camera": plan.camera,
+            "part_names": {str(i): p.name for i, p in enumerate(furniture.parts, start=1)},
+            "parts": {
+                name: {"material": plan.materials[name], "substance": plan.substances[name]} for name in plan.materials
+            },
+            "visible_parts": visible,
+            "envmap": plan.envmap,
+            "degradation": plan.degradation,
+            "spec_hash": spec_hash,
+        }
+    timings["exemplars"] = time.perf_counter() - t
+
+    groundtruth = {
+        "version": GROUNDTRUTH_VERSION,
+        "size": size,
+        "seed": seed,
+        "generator": f"photoshape_flow demo {GENERATOR_VERSION}",
+        "license": "CC0-1.0",
+        "preset": asdict(preset),
+        "shapes": shapes_json,
+        "materials": {r.name: {"substance": r.substance, "path": f"materials/{r.name}"} for r in recipes},
+        "envmaps": [s.name for s in studios],
+        "heldout_envmaps": [s.name for s in held_studios],
+        "exemplars": exemplars_json,
+        "stamps": stamps,
+    }
+    write_text(gt_path, json.dumps(groundtruth, indent=1, sort_keys=True) + "\n")
+    timings["total"] = time.perf_counter() - t0
+    log.info("demo %s (seed %d) in %s: %d exemplars rendered, %.1f s", size, seed, root, rendered, timings["total"])
+    return DemoManifest(
+        root=root,
+        size=size,
+        seed=seed,
+        shapes=tuple(shape_paths),
+        materials=tuple(material_dirs[r.name] for r in recipes),
+        envmaps=tuple(envmap_paths),
+        exemplars=tuple(exemplar_paths),
+        groundtruth=gt_path,
+        rendered=rendered,
+        timings=timings,
+    )

@@ -1,0 +1,190 @@
+"""The demo's ground truth (groundtruth.json) as typed dataclasses, for evaluation.
+
+Schema (version 1), paths relative to the demo folder:
+
+    {"version": 1, "size": "small", "seed": 0, "generator": "photoshape_flow demo <GENERATOR_VERSION>",
+     "shapes": {source_id: {"kind", "in_collection", "path", "segmentation": "semantic|over|under",
+                            "similar_to": source_id | null,
+                            "parts": [{"index", "name", "roles": [...]}, ...]}},
+     "materials": {name: {"substance", "path"}},
+     "envmaps": [name, ...],                  # the collection (envmaps/<name>.hdr)
+     "heldout_envmaps": [name, ...],          # used for exemplars only (groundtruth/envmaps/)
+     "exemplars": {stem: {"image", "mask", "size", "shape": source_id, "in_collection", "similar_to",
+                          "camera": {"azimuth", "elevation", "distance", "fov"},
+                          "part_names": {"1": name, ...},          # mask value -> part name
+                          "parts": {name: {"material", "substance"}},
+                          "visible_parts": [name, ...],            # parts with pixels in the mask
+                          "envmap": {"name", "rotation", "scale"},
+                          "degradation": {...}, "spec_hash": str}}}
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+GROUNDTRUTH_VERSION = 1
+
+
+@dataclass(frozen=True)
+class CameraTruth:
+    azimuth: float
+    elevation: float
+    distance: float
+    fov: float
+
+    def to_camera(self):  # -> photoshape_flow.render.Camera (imported lazily: no Mitsuba here)
+        from photoshape_flow.render.camera import Camera
+
+        return Camera(self.azimuth, self.elevation, self.distance, self.fov)
+
+
+@dataclass(frozen=True)
+class PartTruth:
+    name: str
+    material: str
+    substance: str
+
+
+@dataclass(frozen=True)
+class ShapePartTruth:
+    index: int
+    name: str
+    roles: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ShapeTruth:
+    source_id: str
+    kind: str
+    in_collection: bool
+    path: Path
+    segmentation: str
+    similar_to: str | None
+    parts: tuple[ShapePartTruth, ...]
+
+
+@dataclass(frozen=True)
+class MaterialTruth:
+    name: str
+    substance: str
+    path: Path
+
+
+@dataclass(frozen=True)
+class ExemplarTruth:
+    stem: str
+    image: Path
+    mask: Path
+    size: int
+    shape: str
+    in_collection: bool
+    similar_to: str | None
+    camera: CameraTruth
+    part_names: dict[int, str]
+    parts: dict[str, PartTruth]
+    visible_parts: tuple[str, ...]
+    envmap: dict[str, Any] = field(default_factory=dict)
+    degradation: dict[str, Any] = field(default_factory=dict)
+
+    def load_mask(self) -> np.ndarray:
+        """The part-index mask (H, W) in the exemplar's native frame; 0 = background."""
+        import cv2
+
+        mask = cv2.imread(str(self.mask), cv2.IMREAD_UNCHANGED)
+        if mask is None:
+            raise FileNotFoundError(f"{self.mask}: cannot read the part mask")
+        return mask
+
+    def substance_mask(self, substances: tuple[str, ...]) -> np.ndarray:
+        """(H, W) labels: 0 background, 1 + substances.index(s) for parts of substance s."""
+        mask = self.load_mask()
+        lut = np.zeros(int(max(self.part_names, default=0)) + 1, np.uint8)
+        for index, name in self.part_names.items():
+            part = self.parts.get(name)
+            if part is not None:
+                lut[index] = 1 + substances.index(part.substance)
+        return lut[np.clip(mask, 0, len(lut) - 1)]
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    root: Path
+    size: str
+    seed: int
+    generator: str
+    shapes: dict[str, ShapeTruth]
+    materials: dict[str, MaterialTruth]
+    envmaps: tuple[str, ...]
+    heldout_envmaps: tuple[str, ...]
+    exemplars: dict[str, ExemplarTruth]
+
+
+def _opt(value: Any) -> str | None:
+    return None if value is None else str(value)
+
+
+def parse_groundtruth(data: dict[str, Any], root: Path) -> GroundTruth:
+    """GroundTruth from the decoded JSON; paths are resolved against `root`."""
+    version = data.get("version")
+    if version != GROUNDTRUTH_VERSION:
+        raise ValueError(f"groundtruth version {version!r} not supported (expected {GROUNDTRUTH_VERSION})")
+    shapes = {
+        sid: ShapeTruth(
+            source_id=sid,
+            kind=str(s["kind"]),
+            in_collection=bool(s["in_collection"]),
+            path=root / s["path"],
+            segmentation=str(s["segmentation"]),
+            similar_to=_opt(s.get("similar_to")),
+            parts=tuple(ShapePartTruth(int(p["index"]), str(p["name"]), tuple(p["roles"])) for p in s["parts"]),
+        )
+        for sid, s in data["shapes"].items()
+    }
+    materials = {
+        name: MaterialTruth(name, str(m["substance"]), root / m["path"]) for name, m in data["materials"].items()
+    }
+    exemplars = {}
+    for stem, e in data["exemplars"].items():
+        exemplars[stem] = ExemplarTruth(
+            stem=stem,
+            image=root / e["image"],
+            mask=root / e["mask"],
+            size=int(e["size"]),
+            shape=str(e["shape"]),
+            in_collection=bool(e["in_collection"]),
+            similar_to=_opt(e.get("similar_to")),
+            camera=CameraTruth(**{k: float(e["camera"][k]) for k in ("azimuth", "elevation", "distance", "fov")}),
+            part_names=dict(sorted((int(k), str(v)) for k, v in e["part_names"].items())),
+            parts={name: PartTruth(name, str(p["material"]), str(p["substance"])) for name, p in e["parts"].items()},
+            visible_parts=tuple(e.get("visible_parts", ())),
+            envmap=dict(e.get("envmap", {})),
+            degradation=dict(e.get("degradation", {})),
+        )
+    return GroundTruth(
+        root=root,
+        size=str(data["size"]),
+        seed=int(data["seed"]),
+        generator=str(data["generator"]),
+        shapes=shapes,
+        materials=materials,
+        envmaps=tuple(data.get("envmaps", ())),
+        heldout_envmaps=tuple(data.get("heldout_envmaps", ())),
+        exemplars=exemplars,
+    )
+
+
+def load_groundtruth(path: Path | str) -> GroundTruth:
+    """Read <demo>/groundtruth.json (or the demo folder itself) into typed dataclasses."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "groundtruth.json"
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read ground truth ({exc})") from exc
+    return parse_groundtruth(data, path.parent)

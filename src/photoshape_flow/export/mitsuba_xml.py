@@ -1,0 +1,145 @@
+"""Mitsuba 3 scene XML of a PhotoShape that reloads (``mi.load_file``) and renders the same image.
+
+The scene dict comes from the renderer's own `build_scene`, so the XML describes exactly what was
+rendered. Mitsuba 3.9's dict -> XML path (``mi.parser.parse_dict`` + ``write_file``; older releases
+had ``mi.xml.dict_to_xml``) cannot serialise in-memory objects (mitsuba-renderer/mitsuba3#982,
+#598): it rejects ``mi.Mesh`` and ``mi.Bitmap`` values. So before converting:
+
+- each part's ``mi.Mesh`` (its UVs already carry the texture-scale formula, the jitter and
+  Mitsuba's v flip) is written with ``Mesh.write_ply`` and replaced by a ``ply`` shape with the
+  part's BSDF dict (`render.scene.material_bsdf`);
+- each ``mi.Bitmap`` (float32, resampled as rendered) is written as OpenEXR and referenced by
+  filename; sRGB-flagged ones are linearised first (EXR has no gamma flag; Mitsuba would otherwise
+  read the encoded values as linear), so reloading gives the texels that were rendered;
+- ``transform_relocate`` then copies every referenced file (PLYs, EXRs, the envmap) into
+  ``meshes/`` and ``textures/`` beside the XML, so the folder is self-contained and relocatable.
+
+The film size and sample count are XML defaults (``$resx``/``$spp`` style parameters written by
+Mitsuba), so ``mitsuba scene.xml`` renders the exported view; pass ``seed=`` to ``mi.render`` for
+the same noise.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from photoshape_flow.export.pbr import ResolveRef
+from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, material_from_builtin
+
+
+def concrete_materials(shape: Any, materials: Sequence[Any] | None, resolve_ref: ResolveRef | None) -> list[Any]:
+    """Built-in parts (None) as MaterialSpecs, the way the renderer resolves them."""
+    materials = list(materials) if materials is not None else [None] * len(shape.parts)
+    out: list[MaterialSpec] = []
+    for part, spec in zip(shape.parts, materials, strict=True):
+        if spec is None:
+            builtin = dict(part.builtin_material or {})
+            builtin.setdefault("name", f"builtin_{part.name}")
+            if resolve_ref is None:
+                builtin.pop("texture", None)
+            spec = material_from_builtin(builtin, resolve_ref or Path)
+        out.append(spec)
+    return out
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._") or "texture"
+
+
+def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str], name: str = "texture") -> Any:
+    """Copy of a scene-dict value with Bitmaps written to EXR files named after where they sit
+    (``<material>_base_color.exr``), each Bitmap object once."""
+    if isinstance(value, dict):
+        out: dict[str, Any] = {}
+        for key, item in value.items():
+            if key == "bitmap" and isinstance(item, mi.Bitmap):
+                if id(item) not in written:
+                    target = stage / f"{_safe(name)}.exr"
+                    if target.exists():
+                        target = stage / f"{_safe(name)}_{len(written)}.exr"
+                    if item.srgb_gamma():  # EXR is linear by definition: linearise, or the flag is lost
+                        item = item.convert(item.pixel_format(), mi.Struct.Type.Float32, False)
+                    item.write(str(target))
+                    written[id(value["bitmap"])] = str(target)
+                out["filename"] = written[id(value["bitmap"])]
+            else:
+                child = name if key in ("bsdf", "nested_bsdf") else f"{name}_{key}"
+                out[key] = _serialisable(item, mi, stage, written, child)
+        return out
+    if isinstance(value, mi.Object):
+        raise TypeError(f"cannot write a {type(value).__name__} object to Mitsuba XML")
+    return value
+
+
+def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: str | Path,
+                 names: dict[str, str] | None = None) -> Path:
+    """Write a `build_scene` dict as XML + PLY meshes + EXR textures.
+
+    `bsdfs`: part key -> the part's BSDF dict (the meshes in `scene` hold instantiated BSDFs);
+    `names`: part key -> material name, used to name the texture files.
+    """
+    from photoshape_flow.render.runtime import ensure_mitsuba
+
+    mi = ensure_mitsuba()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="photoshape-xml-") as tmp:
+        stage = Path(tmp)
+        written: dict[int, str] = {}
+        plain: dict[str, Any] = {}
+        for key, value in scene.items():
+            if isinstance(value, mi.Mesh):
+                ply = stage / f"{key}.ply"
+                value.write_ply(str(ply))
+                entry: dict[str, Any] = {"type": "ply", "filename": str(ply)}
+                if key in bsdfs:
+                    entry["bsdf"] = _serialisable(bsdfs[key], mi, stage, written, (names or {}).get(key, key))
+                plain[key] = entry
+            else:
+                plain[key] = _serialisable(value, mi, stage, written, key)
+        config = mi.parser.ParserConfig(mi.variant())
+        state = mi.parser.parse_dict(config, plain)
+        mi.parser.transform_relocate(config, state, str(out.parent))
+        mi.parser.write_file(state, str(out))
+    return out
+
+
+def write_mitsuba_xml(
+    path: str | Path,
+    shape: Any,
+    materials: Sequence[Any] | None,
+    envmap: EnvmapSpec | None,
+    camera: Camera,
+    *,
+    uv_transforms: Sequence[Any] | None = None,
+    size: int = 512,
+    spp: int = 128,
+    floor: bool = False,
+    resolve_ref: ResolveRef | None = None,
+    max_texture_size: int | None = None,
+) -> Path:
+    """Export the beauty scene of `shape` (built-ins resolved with `resolve_ref`) as Mitsuba XML.
+
+    `max_texture_size` defaults to the renderer's (`SceneOptions`), so the XML holds the texels
+    that the PhotoShape renders used.
+    """
+    from photoshape_flow.render.scene import SceneOptions, build_scene, material_bsdf, part_key
+
+    max_texture_size = max_texture_size or SceneOptions().max_texture_size
+    specs = concrete_materials(shape, materials, resolve_ref)
+    options = SceneOptions(
+        size=size, spp=spp, mode="beauty", floor=floor, max_texture_size=max_texture_size,
+        uv_transforms=tuple(uv_transforms) if uv_transforms is not None else None,
+    )
+    scene = build_scene(shape, specs, envmap, camera, options)
+    bsdfs = {
+        part_key(part.index): material_bsdf(spec, max_texture_size)
+        for part, spec in zip(shape.parts, specs, strict=True)
+        if len(part.faces)
+    }
+    names = {part_key(part.index): spec.name for part, spec in zip(shape.parts, specs, strict=True)}
+    return scene_to_xml(scene, bsdfs, path, names)

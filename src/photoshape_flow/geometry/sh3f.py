@@ -1,0 +1,197 @@
+"""Sweet Home 3D furniture catalogs (.sh3f): the catalog listing and each model's files.
+
+A catalog is a zip holding `PluginFurnitureCatalog.properties` (Java properties, ISO-8859-1 with
+\\uXXXX escapes) whose numbered keys (`name#7`, `model#7`, `category#7`, `modelRotation#7`, ...)
+describe each piece, and the OBJ + MTL + textures of every model. `catalog_entries` lists the pieces;
+`model_files` finds the OBJ's MTL libraries and textures inside the zip (the dependency closure) so
+only those are extracted, through `SafeZip`.
+"""
+
+from __future__ import annotations
+
+import posixpath
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from photoshape_flow.geometry.archive import SafeZip, join_member, normalise_member
+from photoshape_flow.geometry.obj import mtl_references, obj_references
+from photoshape_flow.geometry.raw import BadShapeError
+
+CATALOG_FILE = "PluginFurnitureCatalog.properties"
+
+# Keywords in a piece's name or tags -> our category (first match wins; checked in this order).
+CATEGORY_KEYWORDS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("sofa", ("sofa", "couch", "loveseat", "settee", "futon", "canape")),
+    ("stool", ("stool",)),
+    ("bench", ("bench",)),
+    ("chair", ("armchair", "chair", "recliner", "rocker")),
+    ("table", ("table", "desk")),
+    ("bed", ("bed",)),
+    ("lamp", ("lamp", "light")),
+    ("cabinet", ("cabinet", "cupboard", "dresser", "wardrobe", "shelf", "bookcase")),
+)
+
+
+def parse_properties(text: str) -> dict[str, str]:
+    """Java .properties: comments, `=`/`:`/space separators, line continuations, \\u escapes."""
+    result: dict[str, str] = {}
+    logical: list[str] = []
+    buffer = ""
+    for raw in text.splitlines():
+        line = raw.lstrip()
+        if not buffer and (not line or line[0] in "#!"):
+            continue
+        trailing = len(line) - len(line.rstrip("\\"))
+        if trailing % 2 == 1:
+            buffer += line[:-1]
+            continue
+        logical.append(buffer + line)
+        buffer = ""
+    if buffer:
+        logical.append(buffer)
+    for line in logical:
+        match = re.match(r"((?:\\.|[^=:\s\\])*)\s*[=:\s]?\s*(.*)$", line)
+        if not match:
+            continue
+        key, value = _unescape(match.group(1)), _unescape(match.group(2))
+        if key:
+            result[key] = value
+    return result
+
+
+def _unescape(value: str) -> str:
+    out: list[str] = []
+    i = 0
+    while i < len(value):
+        ch = value[i]
+        if ch == "\\" and i + 1 < len(value):
+            nxt = value[i + 1]
+            if nxt == "u" and re.match(r"[0-9a-fA-F]{4}", value[i + 2 : i + 6]):
+                out.append(chr(int(value[i + 2 : i + 6], 16)))
+                i += 6
+                continue
+            out.append({"t": "\t", "n": "\n", "r": "\r", "f": "\f"}.get(nxt, nxt))
+            i += 2
+            continue
+        out.append(ch)
+        i += 1
+    return "".join(out)
+
+
+def category_of(name: str, tags: str = "", catalog_category: str = "") -> str:
+    """Our category for a catalog piece from its name and tags; the catalog's category otherwise."""
+    words = set(re.findall(r"[a-z]+", f"{name} {tags}".lower()))
+    text = f"{name} {tags}".lower()
+    for category, keywords in CATEGORY_KEYWORDS:
+        for keyword in keywords:
+            if keyword in words or re.search(rf"\b{keyword}s?\b", text):
+                return category
+    slug = re.sub(r"[^a-z0-9]+", "-", catalog_category.lower()).strip("-")
+    return slug or "misc"
+
+
+@dataclass
+class CatalogEntry:
+    index: int
+    id: str
+    name: str
+    category: str  # ours (chair, sofa, stool, ...)
+    catalog_category: str
+    tags: str
+    model: str  # normalised member name of the model file
+    creator: str | None
+    rotation: tuple[float, ...] | None
+    props: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Catalog:
+    path: Path
+    id: str
+    name: str
+    license: str | None
+    provider: str | None
+    entries: list[CatalogEntry]
+    invalid: list[tuple[str, str]]  # (label, reason) of pieces that cannot be listed
+
+
+def read_catalog(archive: SafeZip) -> Catalog:
+    """The pieces of a catalog, with their model members validated (no traversal)."""
+    if archive.find(CATALOG_FILE) is None:
+        raise BadShapeError(f"{archive.path.name}: no {CATALOG_FILE} (not a Sweet Home 3D furniture catalog)")
+    props = parse_properties(archive.read(CATALOG_FILE).decode("latin-1"))
+    indices = sorted({int(k.split("#", 1)[1]) for k in props if re.match(r"^model#\d+$", k)})
+    entries: list[CatalogEntry] = []
+    invalid: list[tuple[str, str]] = []
+    for i in indices:
+        get = lambda key, i=i: props.get(f"{key}#{i}")  # noqa: E731
+        piece_id = get("id") or f"piece-{i}"
+        name = get("name") or piece_id
+        label = f"{archive.path.name}:{piece_id}"
+        model = (get("model") or "").strip()
+        try:
+            if not model:
+                raise BadShapeError("no model file")
+            member = normalise_member(model.lstrip("/"))
+        except BadShapeError as exc:
+            invalid.append((label, str(exc)))
+            continue
+        rotation = None
+        if raw_rotation := get("modelRotation"):
+            try:
+                values = tuple(float(x) for x in raw_rotation.split())
+                rotation = values if len(values) == 9 else None
+            except ValueError:
+                rotation = None
+        tags = get("tags") or ""
+        catalog_category = get("category") or ""
+        entries.append(
+            CatalogEntry(
+                index=i,
+                id=piece_id,
+                name=name,
+                category=category_of(name, tags, catalog_category),
+                catalog_category=catalog_category,
+                tags=tags,
+                model=member,
+                creator=get("creator"),
+                rotation=rotation,
+                props={k.split("#", 1)[0]: v for k, v in props.items() if k.endswith(f"#{i}")},
+            )
+        )
+    return Catalog(
+        path=archive.path,
+        id=props.get("id", archive.path.stem),
+        name=props.get("name", archive.path.stem),
+        license=props.get("license"),
+        provider=props.get("provider"),
+        entries=entries,
+        invalid=invalid,
+    )
+
+
+def model_files(archive: SafeZip, model: str) -> list[str]:
+    """The model member and the MTL libraries and textures it references (present members only)."""
+    info = archive.find(model)
+    if info is None:
+        raise BadShapeError(f"model {model!r} is missing from the archive")
+    files = [model]
+    if not model.lower().endswith(".obj"):
+        return files
+    base = posixpath.dirname(model)
+    text = archive.read(model).decode("utf-8", errors="replace")
+    for lib in obj_references(text):
+        mtl = join_member(base, lib)
+        if archive.find(mtl) is None:
+            continue
+        files.append(mtl)
+        mtl_text = archive.read(mtl).decode("utf-8", errors="replace")
+        for tex in mtl_references(mtl_text):
+            member = join_member(posixpath.dirname(mtl), tex)
+            if archive.find(member) is not None:
+                files.append(member)
+            elif archive.find(join_member(base, posixpath.basename(tex))) is not None:
+                files.append(join_member(base, posixpath.basename(tex)))
+    return list(dict.fromkeys(files))

@@ -1,0 +1,355 @@
+"""`photoshape eval`: compare what the pipeline recorded with the demo's ground truth.
+
+Every stage's metrics land in the `evaluation` table as (run, stage, method, metric, value, count),
+so runs can be compared in SQL. Stages:
+
+- coarse-alignment: shape recall@1/@5, median pose error, silhouette IoU for the nearest-shape case.
+- fine-alignment: part-label accuracy after coarse, flow and CRF (and silhouette IoU).
+- substances: accuracy of each observed part's substance against the substance that covers most of
+  the part's pixels in the ground truth.
+- training: the classifier's validation metrics (the paper's Table 4 columns).
+- inference: per method (ours and every baseline) per-part material top-1/top-5 and substance
+  accuracy — the ground-truth material of a part is the one covering most of its aligned pixels, so
+  pairs with a merely similar shape are scored too — and the re-render error of the PhotoShape at the
+  exemplar's camera inside the exemplar's mask (RMSE and SSIM).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import math
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.align.partmap import crop_square, exemplar_at, resize_labels, square_box, zoom_to_fit
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.db.upsert import upsert
+from photoshape_flow.store import BlobStore
+
+log = logging.getLogger(__name__)
+
+EVAL_STAGES: tuple[str, ...] = ("coarse-alignment", "fine-alignment", "substances", "training", "inference")
+
+
+@dataclass(frozen=True)
+class Metric:
+    stage: str
+    method: str
+    metric: str
+    value: float | None
+    count: int | None = None
+
+
+# --- ground truth in the stored exemplar frame --------------------------------------------------------
+
+def _exemplar_truths(session: Session, gt: Any, source: str | None) -> dict[int, Any]:
+    """exemplar id -> its ground-truth record (matched by file stem = source_id)."""
+    query = sa.select(m.Exemplar).where(m.Exemplar.status == "ok")
+    if source is not None:
+        query = query.where(m.Exemplar.source == source)
+    out = {}
+    for exemplar in session.execute(query).scalars():
+        stem = Path(exemplar.source_id).stem
+        if stem in gt.exemplars:
+            out[exemplar.id] = gt.exemplars[stem]
+    return out
+
+
+def truth_labels(truth: Any, exemplar: m.Exemplar) -> tuple[np.ndarray, list[str], list[str]]:
+    """Ground-truth material and substance labels per pixel of the stored exemplar frame.
+
+    Returns (labels (S, S) int: 0 background, i = index into the two name lists + 1).
+    """
+    native = truth.load_mask()
+    if native.ndim == 3:
+        native = native[..., 0]
+    names = sorted(truth.parts)
+    lut = np.zeros(int(max(max(truth.part_names, default=0), int(native.max(initial=0)))) + 1, np.int32)
+    for value, name in truth.part_names.items():
+        if name in truth.parts:
+            lut[int(value)] = names.index(name) + 1
+    crop = (exemplar.meta or {}).get("crop") or {"x0": 0, "y0": 0, "side": max(native.shape)}
+    cropped = crop_square(lut[native.astype(np.int64)], int(crop["x0"]), int(crop["y0"]), int(crop["side"]), fill=0)
+    labels = resize_labels(cropped.astype(np.int32), int(exemplar.size or cropped.shape[0]))
+    return labels, [truth.parts[n].material for n in names], [truth.parts[n].substance for n in names]
+
+
+def _majority(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -> int | None:
+    """The non-zero label covering most of `mask` (None when the mask is mostly ground-truth background)."""
+    values = labels[mask]
+    if values.size == 0:
+        return None
+    counts = np.bincount(values, minlength=1)
+    if counts[1:].sum() < min_fraction * values.size:
+        return None
+    return int(np.argmax(counts[1:]) + 1)
+
+
+def _part_map(store: BlobStore, alignment: m.Alignment, size: int) -> np.ndarray:
+    part_map = store.load_image(alignment.crf_blob)
+    if part_map.ndim == 3:
+        part_map = part_map[..., 0]
+    return resize_labels(part_map, size).astype(np.int32)
+
+
+# --- stages ----------------------------------------------------------------------------------------
+
+def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, Any]) -> list[Metric]:
+    correct = total = 0
+    rows = session.execute(
+        sa.select(m.PartSubstance, m.Pair, m.Part, m.Alignment, m.Exemplar)
+        .join(m.Pair, m.Pair.id == m.PartSubstance.pair_id)
+        .join(m.Part, m.Part.id == m.PartSubstance.part_id)
+        .join(m.Exemplar, m.Exemplar.id == m.Pair.exemplar_id)
+        .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == "flow-crf"))
+        .where(m.PartSubstance.observed, m.Alignment.status == "ok", m.Pair.exemplar_id.in_(list(truths)))
+    ).all()
+    cache: dict[int, tuple[np.ndarray, list[str], list[str], np.ndarray]] = {}
+    for ps, pair, part, alignment, exemplar in rows:
+        if pair.id not in cache:
+            labels, _, subs = truth_labels(truths[exemplar.id], exemplar)
+            cache[pair.id] = (labels, [], subs, _part_map(store, alignment, labels.shape[0]))
+        labels, _, subs, part_map = cache[pair.id]
+        winner = _majority(labels, part_map == part.index)
+        if winner is None:
+            continue
+        total += 1
+        correct += int(ps.substance == subs[winner - 1])
+    return [Metric("substances", "substance-network", "part_substance_accuracy",
+                   correct / total if total else None, total)]
+
+
+def evaluate_training(session: Session) -> list[Metric]:
+    out = []
+    for clf in session.execute(
+        sa.select(m.Classifier).where(m.Classifier.status == "ok").order_by(m.Classifier.id)
+    ).scalars():
+        for key, value in (clf.metrics or {}).items():
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                out.append(Metric("training", f"{clf.kind}:{clf.name}", key, float(value)))
+    return out
+
+
+class _Rerenderer:
+    """Renders a pair's PhotoShape at the exemplar's camera, cropped like the exemplar."""
+
+    def __init__(self, store: BlobStore, size: int, spp: int):
+        from photoshape_flow.render import EnvmapSpec, Renderer
+        from photoshape_flow.render.specs import MaterialSpec
+
+        self.store = store
+        self.size = size
+        self.spp = spp
+        self.renderer = Renderer(resolve=store.resolve)
+        self._material_spec = MaterialSpec
+        self._envmap_spec = EnvmapSpec
+        self.meshes: dict[int, Any] = {}
+        self.materials: dict[int, Any] = {}
+        self.envmap = None
+
+    def set_envmap(self, envmap: m.Envmap | None) -> None:
+        if envmap is not None and envmap.blob:
+            self.envmap = self._envmap_spec(self.store.resolve(envmap.blob))
+
+    def material(self, row: m.Material) -> Any:
+        if row.id not in self.materials:
+            from photoshape_flow.pipeline.training_renders import material_spec
+
+            self.materials[row.id] = material_spec(row, self.store)
+        return self.materials[row.id]
+
+    def render(self, session: Session, pair: m.Pair, materials: dict[int, int | None]) -> tuple[np.ndarray, np.ndarray]:
+        from photoshape_flow.geometry.mesh import ShapeMesh
+        from photoshape_flow.render import Camera
+
+        if pair.shape_id not in self.meshes:
+            shape_row = session.get(m.Shape, pair.shape_id)
+            self.meshes[pair.shape_id] = ShapeMesh.from_npz_bytes(self.store.read_bytes(shape_row.mesh_blob))
+        mesh = self.meshes[pair.shape_id]
+        specs = []
+        for part in mesh.parts:
+            material_id = materials.get(part.index)
+            specs.append(self.material(session.get(m.Material, material_id)) if material_id else None)
+        camera = zoom_to_fit(mesh, Camera(pair.azimuth, pair.elevation, pair.camera_distance, pair.fov))
+        render_size = int(math.ceil(self.size * 1.25))
+        result = self.renderer.beauty(mesh, specs, camera, self.envmap, size=render_size, spp=self.spp, seed=0)
+        box = square_box(result.alpha > 0.5)
+        if box is None:
+            raise ValueError("the shape is not visible at the pair's camera")
+        rgb = crop_square(result.srgb, *box, fill=255)
+        alpha = crop_square(result.alpha, *box, fill=0.0)
+        rgb = cv2.resize(rgb, (self.size, self.size), interpolation=cv2.INTER_AREA)
+        alpha = cv2.resize(alpha, (self.size, self.size), interpolation=cv2.INTER_AREA) > 0.5
+        return rgb, alpha
+
+
+def rerender_error(render: np.ndarray, exemplar: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """RMSE (sRGB in [0, 1]) and mean SSIM (grey) inside the exemplar's mask."""
+    from skimage.metrics import structural_similarity
+
+    a = render.astype(np.float64) / 255.0
+    b = exemplar.astype(np.float64) / 255.0
+    if not mask.any():
+        return float("nan"), float("nan")
+    rmse = float(np.sqrt(((a - b) ** 2)[mask].mean()))
+    grey_a = cv2.cvtColor(render, cv2.COLOR_RGB2GRAY).astype(np.float64) / 255.0
+    grey_b = cv2.cvtColor(exemplar, cv2.COLOR_RGB2GRAY).astype(np.float64) / 255.0
+    _, ssim_map = structural_similarity(grey_a, grey_b, data_range=1.0, full=True, win_size=7)
+    return rmse, float(ssim_map[mask].mean())
+
+
+def evaluate_inference(
+    session: Session, store: BlobStore, truths: dict[int, Any], *, rerender_size: int = 128, rerender_spp: int = 16,
+    rerender_max_pairs: int | None = 200,
+) -> list[Metric]:
+    """Material top-1/top-5 and substance accuracy per part, re-render RMSE/SSIM per pair, per method."""
+    rows = session.execute(
+        sa.select(m.Assignment, m.Part.index, m.Material.name, m.Material.substance)
+        .join(m.Part, m.Part.id == m.Assignment.part_id)
+        .join(m.Pair, m.Pair.id == m.Assignment.pair_id)
+        .outerjoin(m.Material, m.Material.id == m.Assignment.material_id)
+        .where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
+        .order_by(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.rank)
+    ).all()
+    ranked: dict[tuple[int, str], dict[int, list[tuple[str | None, str | None, int | None]]]] = defaultdict(
+        lambda: defaultdict(list))
+    method_of: dict[str, str] = {}
+    for a, part_index, name, substance in rows:
+        ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
+        method_of[a.method_key] = a.method
+    scores: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    truth_cache: dict[int, Any] = {}
+    rerender_pairs: dict[str, int] = defaultdict(int)
+    rerenderer: _Rerenderer | None = None
+    for (pair_id, method_key), parts in ranked.items():
+        pair = session.get(m.Pair, pair_id)
+        exemplar = session.get(m.Exemplar, pair.exemplar_id)
+        alignment = session.execute(
+            sa.select(m.Alignment).where(m.Alignment.pair_id == pair_id, m.Alignment.method == "flow-crf",
+                                         m.Alignment.status == "ok")
+        ).scalar_one_or_none()
+        if alignment is None:
+            continue
+        if pair_id not in truth_cache:
+            labels, mats, subs = truth_labels(truths[exemplar.id], exemplar)
+            truth_cache[pair_id] = (labels, mats, subs, _part_map(store, alignment, labels.shape[0]))
+        labels, mats, subs, part_map = truth_cache[pair_id]
+        for part_index, choices in parts.items():
+            winner = _majority(labels, part_map == part_index)
+            if winner is None:
+                continue
+            names = [c[0] for c in choices]
+            scores[method_key]["material_top1"].append(float(names[:1] == [mats[winner - 1]]))
+            scores[method_key]["material_top5"].append(float(mats[winner - 1] in names[:5]))
+            if choices[0][1] is not None:
+                scores[method_key]["substance_accuracy"].append(float(choices[0][1] == subs[winner - 1]))
+        # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
+        if pair.exemplar_rank not in (None, 1):
+            continue
+        if rerender_max_pairs is not None and rerender_pairs[method_key] >= rerender_max_pairs:
+            continue
+        if rerenderer is None:
+            from photoshape_flow.pipeline.publish import choose_envmap
+
+            rerenderer = _Rerenderer(store, rerender_size, rerender_spp)
+            rerenderer.set_envmap(choose_envmap(session))
+        try:
+            chosen = {idx: c[0][2] for idx, c in parts.items()}
+            render, _ = rerenderer.render(session, pair, chosen)
+            photo, fg = exemplar_at(store.load_image(exemplar.image_blob), store.load_image(exemplar.mask_blob),
+                                    rerender_size)
+            rmse, ssim = rerender_error(render, photo, fg)
+        except Exception as exc:  # one unrenderable pair never stops the evaluation
+            log.warning("pair %s: re-render failed: %s", pair_id, exc)
+            continue
+        rerender_pairs[method_key] += 1
+        scores[method_key]["rerender_rmse"].append(rmse)
+        scores[method_key]["rerender_ssim"].append(ssim)
+    out = []
+    for method_key, metrics in sorted(scores.items()):
+        for metric, values in sorted(metrics.items()):
+            finite = [v for v in values if not math.isnan(v)]
+            out.append(Metric("inference", method_key, metric, float(np.mean(finite)) if finite else None, len(finite)))
+    return out
+
+
+def _dict_metrics(stage: str, method: str, values: dict[str, Any]) -> list[Metric]:
+    out = []
+    for key, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            continue
+        count_key = f"{key}_count"
+        count = values.get(count_key) if isinstance(values.get(count_key), int) else None
+        out.append(Metric(stage, method, key, None if (isinstance(value, float) and math.isnan(value))
+                          else float(value), count))
+    return out
+
+
+def run_evaluation(
+    groundtruth: str | Path,
+    run: str | None = None,
+    *,
+    stages: Iterable[str] = EVAL_STAGES,
+    exemplar_source: str | None = None,
+    settings: Settings | None = None,
+    rerender_size: int = 128,
+    rerender_spp: int = 16,
+    rerender_max_pairs: int | None = 200,
+) -> tuple[str, list[Metric]]:
+    """Evaluate what the database holds against a demo ground truth; stores and returns the metrics."""
+    from photoshape_flow.demo import load_groundtruth
+
+    settings = settings or get_settings()
+    store = BlobStore(settings.blob_root)
+    gt = load_groundtruth(groundtruth)
+    run = run or dt.datetime.now(dt.UTC).strftime("eval-%Y%m%d-%H%M%S")
+    stages = set(stages)
+    metrics: list[Metric] = []
+    with session_scope(settings.resolved_database_url) as session:
+        truths = _exemplar_truths(session, gt, exemplar_source)
+        if not truths:
+            raise ValueError(f"no ingested exemplar matches the ground truth in {groundtruth}")
+        if "coarse-alignment" in stages:
+            from photoshape_flow.pipeline.coarse_alignment import evaluate_coarse_alignment
+
+            metrics += _dict_metrics("coarse-alignment", "hog", evaluate_coarse_alignment(session, gt))
+        if "fine-alignment" in stages:
+            from photoshape_flow.pipeline.fine_alignment import evaluate_fine_alignment
+
+            metrics += _dict_metrics("fine-alignment", "flow-crf",
+                                     evaluate_fine_alignment(session, gt, settings=settings))
+        if "substances" in stages:
+            metrics += evaluate_substances(session, store, truths)
+        if "training" in stages:
+            metrics += evaluate_training(session)
+        if "inference" in stages:
+            metrics += evaluate_inference(session, store, truths, rerender_size=rerender_size,
+                                          rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs)
+    with session_scope(settings.resolved_database_url) as session:
+        for metric in metrics:
+            upsert(session, m.Evaluation, {
+                "run": run, "stage": metric.stage, "method": metric.method, "metric": metric.metric,
+                "value": metric.value, "count": metric.count,
+                "params": {"groundtruth": str(groundtruth), "exemplars": len(truths)},
+            }, key=["run", "stage", "method", "metric"])
+    return run, metrics
+
+
+def metrics_table(metrics: Sequence[Metric]) -> list[dict[str, Any]]:
+    """Rows for a table (CLI, Prefect artifact, docs)."""
+    return [
+        {"stage": x.stage, "method": x.method, "metric": x.metric,
+         "value": None if x.value is None else round(x.value, 4), "count": x.count}
+        for x in metrics
+    ]

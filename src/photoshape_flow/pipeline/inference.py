@@ -1,0 +1,355 @@
+"""Inference stage: a ranked material per part of every aligned pair, for the classifier and baselines.
+
+For each pair with a fine alignment, each part visible in the aligned (CRF) part map is classified on
+the exemplar with its mask; parts with no pixels are *unobserved*: their substance comes from a prior
+(the substances the same part showed in the shape's other pairs, else a part-name prior), their
+material from the method restricted to that substance, and their rows are marked `unobserved`.
+
+Methods (`assignment.method`): `classifier` (ours; rows keyed `classifier:<id>` so a new classifier
+adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
+path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
+claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.classify.assignment import (
+    RankedMaterial,
+    color_match,
+    foreground_of_render,
+    item_seed,
+    median_lab,
+    one_substance,
+    random_of_substance,
+    substance_vector,
+)
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db import claims
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.store import BlobStore
+from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
+from photoshape_flow.vocab import SUBSTANCES
+
+log = logging.getLogger(__name__)
+
+METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
+ALIGNMENT_METHOD = "flow-crf"
+CODE_VERSION = "inference-1"
+
+
+@dataclass
+class InferenceSummary:
+    method_key: str
+    pairs_done: int = 0
+    pairs_skipped: int = 0
+    pairs_failed: list[tuple[int, str]] = field(default_factory=list)
+    rows: int = 0
+
+
+@dataclass
+class _PartInput:
+    part: m.Part
+    mask: np.ndarray | None  # None: unobserved
+    substance: PartSubstanceView
+
+
+@dataclass
+class PartSubstanceView:
+    substance: str | None
+    probs: dict[str, float]
+    observed: bool
+
+
+def resolve_classifier(session: Session, classifier_id: int | None = None) -> m.Classifier | None:
+    """The given material classifier, or the newest one that finished training."""
+    if classifier_id is not None:
+        clf = session.get(m.Classifier, classifier_id)
+        if clf is None or clf.kind != "material":
+            raise ValueError(f"classifier {classifier_id} is not a material classifier")
+        return clf
+    return session.execute(
+        sa.select(m.Classifier)
+        .where(m.Classifier.kind == "material", m.Classifier.status == "ok")
+        .order_by(m.Classifier.id.desc())
+        .limit(1)
+    ).scalar_one_or_none()
+
+
+def pending_pairs(
+    session: Session, method_key: str, params_hash: str, pair_ids: Sequence[int] | None = None
+) -> list[int]:
+    """Aligned, non-excluded pairs whose rows for this method are missing or stale."""
+    done = sa.select(m.Assignment.pair_id).where(
+        m.Assignment.method_key == method_key, m.Assignment.params_hash == params_hash
+    )
+    query = (
+        sa.select(m.Pair.id)
+        .join(m.Shape, m.Shape.id == m.Pair.shape_id)
+        .join(m.Exemplar, m.Exemplar.id == m.Pair.exemplar_id)
+        .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD))
+        .where(~m.Pair.exclude, ~m.Shape.exclude, ~m.Exemplar.exclude, m.Alignment.status == "ok")
+        .where(m.Pair.id.not_in(done))
+        .order_by(m.Pair.id)
+    )
+    if pair_ids is not None:
+        query = query.where(m.Pair.id.in_(list(pair_ids)))
+    return list(session.execute(query).scalars())
+
+
+def _hash(payload: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+class _Context:
+    """What one inference run needs once: materials, their colours, the classifier."""
+
+    def __init__(self, session: Session, store: BlobStore, method: str, classifier: m.Classifier | None,
+                 settings: Settings, top_k: int):
+        self.store = store
+        self.method = method
+        self.top_k = top_k
+        self.settings = settings
+        mats = session.execute(
+            sa.select(m.Material).where(m.Material.enabled, m.Material.status == "ok").order_by(m.Material.id)
+        ).scalars().all()
+        self.materials = [(mat.id, mat.substance) for mat in mats]
+        self.material_substance = dict(self.materials)
+        self.available_substances = {sub for _, sub in self.materials}
+        self.classifier = classifier
+        self.model = None
+        if method == "classifier":
+            if classifier is None or not classifier.checkpoint_blob:
+                raise ValueError("no trained material classifier: run the training stage first")
+            from photoshape_flow.classify.infer import load_classifier
+
+            self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
+        self.material_labs: dict[int, np.ndarray] = {}
+        if method == "color-match":
+            for mat in mats:
+                lab = material_lab(mat, store)
+                if lab is not None:
+                    self.material_labs[mat.id] = lab
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return {
+            "method": self.method,
+            "classifier": self.classifier.id if (self.classifier and self.method == "classifier") else None,
+            "top_k": self.top_k,
+            "materials": [mid for mid, _ in self.materials],
+            "code": CODE_VERSION,
+        }
+
+
+def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
+    """Median CIELAB colour of a material's render (its preview), else of its albedo."""
+    if material.preview_blob and store.exists(material.preview_blob):
+        image = store.load_image(material.preview_blob)
+        alpha = image[..., 3] / 255.0 if image.ndim == 3 and image.shape[2] == 4 else None
+        rgb = image[..., :3]
+        if rgb.dtype != np.uint8:
+            rgb = (np.clip(rgb.astype(np.float64) / np.iinfo(rgb.dtype).max, 0, 1) * 255).astype(np.uint8)
+        return median_lab(rgb, foreground_of_render(rgb, alpha))
+    albedo = (material.maps or {}).get("albedo")
+    if albedo and store.exists(albedo):
+        return median_lab(store.load_image(albedo)[..., :3])
+    color = (material.params or {}).get("albedo")
+    if color is not None:
+        rgb = (np.clip(np.asarray(color, np.float64), 0, 1) * 255).astype(np.uint8).reshape(1, 1, 3)
+        return median_lab(rgb)
+    return None
+
+
+def _prior_substance(session: Session, part: m.Part, pair_id: int, available: set[str]) -> tuple[str | None, dict]:
+    """Substance for an unobserved part: the shape's other pairs, else the part-name prior."""
+    observed = session.execute(
+        sa.select(m.PartSubstance.substance).where(
+            m.PartSubstance.part_id == part.id, m.PartSubstance.pair_id != pair_id,
+            m.PartSubstance.observed, m.PartSubstance.substance.is_not(None),
+        )
+    ).scalars().all()
+    prior = empirical_prior(observed) or name_prior(part.name)
+    prior = restrict(prior, available)
+    if not prior:
+        return None, {}
+    best = max(SUBSTANCES, key=lambda s: (prior.get(s, 0.0), -SUBSTANCES.index(s)))
+    return best, prior
+
+
+def _load_part_map(store: BlobStore, alignment: m.Alignment, shape: tuple[int, int]) -> np.ndarray:
+    part_map = store.load_image(alignment.crf_blob or alignment.flow_blob or alignment.coarse_blob)
+    if part_map.ndim == 3:
+        part_map = part_map[..., 0]
+    if part_map.shape != shape:
+        part_map = cv2.resize(part_map, (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST)
+    return part_map.astype(np.int32)
+
+
+def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInput, pair_id: int,
+               batch: dict[int, tuple[np.ndarray, np.ndarray]]) -> list[RankedMaterial]:
+    sub = item.substance
+    if ctx.method == "no-classifier":
+        seed = item_seed(pair_id, item.part.id, ctx.method)
+        return random_of_substance(sub.substance, ctx.materials, seed, ctx.top_k)
+    if ctx.method == "color-match":
+        mask = item.mask if item.mask is not None else fg
+        lab = median_lab(image, mask)
+        if lab is None:
+            return []
+        return color_match(lab, ctx.material_labs, ctx.material_substance, ctx.top_k,
+                           substance=None if item.mask is not None else sub.substance)
+    # classifier: material probabilities x substance confidence of the substance network
+    mat_probs, _ = batch[item.part.id]
+    if item.mask is not None:
+        weights = substance_vector(sub.probs)
+    else:  # unobserved: only the prior substance's materials
+        weights = one_substance(sub.substance) if sub.substance else substance_vector(None)
+    assert ctx.model is not None
+    ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials))[0]
+    enabled = ctx.material_substance
+    kept = [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked if r.material_id in enabled]
+    return kept[: ctx.top_k]
+
+
+def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, params_hash: str) -> int:
+    """Replace this pair's rows for `method_key`; returns the number of rows written."""
+    shape = session.get(m.Shape, pair.shape_id)
+    exemplar = session.get(m.Exemplar, pair.exemplar_id)
+    assert shape is not None and exemplar is not None
+    parts = session.execute(sa.select(m.Part).where(m.Part.shape_id == shape.id).order_by(m.Part.index)).scalars().all()
+    rows: list[m.Assignment] = []
+    if ctx.method == "builtin":
+        for part in parts:
+            rows.append(m.Assignment(
+                pair_id=pair.id, part_id=part.id, method="builtin", method_key=method_key, rank=1,
+                material_id=None, score=None, params={"builtin": part.builtin_material}, params_hash=params_hash,
+            ))
+    else:
+        alignment = session.execute(
+            sa.select(m.Alignment).where(m.Alignment.pair_id == pair.id, m.Alignment.method == ALIGNMENT_METHOD)
+        ).scalar_one()
+        image = ctx.store.load_image(exemplar.image_blob)[..., :3]
+        fg = ctx.store.load_image(exemplar.mask_blob) > 0 if exemplar.mask_blob else np.ones(image.shape[:2], bool)
+        if fg.ndim == 3:
+            fg = fg[..., 0]
+        part_map = _load_part_map(ctx.store, alignment, image.shape[:2])
+        substances = {
+            ps.part_id: ps for ps in session.execute(
+                sa.select(m.PartSubstance).where(m.PartSubstance.pair_id == pair.id)
+            ).scalars()
+        }
+        min_pixels = max(16, int(0.0005 * part_map.size))
+        items: list[_PartInput] = []
+        for part in parts:
+            mask = part_map == part.index
+            ps = substances.get(part.id)
+            observed = int(mask.sum()) >= min_pixels and (ps is None or ps.observed)
+            if observed and ps is not None and ps.substance:
+                view = PartSubstanceView(ps.substance, dict(ps.probs or {}), True)
+            elif observed:
+                # aligned but no substance row (substances stage not run): fall back to the prior
+                sub, prior = _prior_substance(session, part, pair.id, ctx.available_substances)
+                view = PartSubstanceView(sub, prior, True)
+            else:
+                sub, prior = _prior_substance(session, part, pair.id, ctx.available_substances)
+                view = PartSubstanceView(sub, prior, False)
+            items.append(_PartInput(part, mask if observed else None, view))
+        batch: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        if ctx.method == "classifier":
+            assert ctx.model is not None
+            masks = [it.mask if it.mask is not None else fg for it in items]
+            mat, sub = ctx.model.predict(image, masks)
+            batch = {it.part.id: (mat[i], sub[i]) for i, it in enumerate(items)}
+        for item in items:
+            ranked = _rank_part(ctx, image, fg, item, pair.id, batch)
+            for rank, r in enumerate(ranked, start=1):
+                rows.append(m.Assignment(
+                    pair_id=pair.id, part_id=item.part.id, method=ctx.method, method_key=method_key,
+                    classifier_id=ctx.classifier.id if ctx.method == "classifier" and ctx.classifier else None,
+                    rank=rank, material_id=r.material_id, score=r.score, substance=r.substance,
+                    unobserved=item.mask is None,
+                    params={"part_substance": item.substance.substance,
+                            "substance_confidence": item.substance.probs.get(item.substance.substance or "", None)},
+                    params_hash=params_hash,
+                ))
+    session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair.id,
+                                                  m.Assignment.method_key == method_key))
+    session.add_all(rows)
+    return len(rows)
+
+
+def run_inference(
+    method: str = "classifier",
+    *,
+    classifier_id: int | None = None,
+    pair_ids: Sequence[int] | None = None,
+    top_k: int = 5,
+    batch_size: int = 16,
+    settings: Settings | None = None,
+) -> InferenceSummary:
+    """Write ranked assignments for every pending pair with one method; resumable and idempotent."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    settings = settings or get_settings()
+    store = BlobStore(settings.blob_root)
+    url = settings.resolved_database_url
+    with session_scope(url) as session:
+        classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
+        ctx = _Context(session, store, method, classifier, settings, top_k)
+        method_key = f"classifier:{classifier.id}" if classifier is not None else method
+        params_hash = _hash(ctx.params)
+        todo = pending_pairs(session, method_key, params_hash, pair_ids)
+    summary = InferenceSummary(method_key=method_key)
+    stage = f"inference:{method_key}"
+    for start in range(0, len(todo), batch_size):
+        keys = [str(p) for p in todo[start : start + batch_size]]
+        with session_scope(url) as session:
+            mine = claims.claim(session, stage, keys, params_hash=params_hash,
+                                lease_seconds=settings.claim_lease_seconds, retry_failed=True)
+        summary.pairs_skipped += len(keys) - len(mine)
+        for key in mine:
+            pair_id = int(key)
+            try:
+                with session_scope(url) as session:
+                    pair = session.get(m.Pair, pair_id)
+                    assert pair is not None
+                    summary.rows += infer_pair(session, ctx, pair, method_key, params_hash)
+                    claims.complete(session, stage, [key])
+                summary.pairs_done += 1
+            except Exception as exc:  # one bad pair never stops the batch
+                reason = f"{type(exc).__name__}: {exc}"
+                log.warning("pair %s: %s inference failed: %s", pair_id, method_key, reason)
+                summary.pairs_failed.append((pair_id, reason))
+                with session_scope(url) as session:
+                    claims.fail(session, stage, key, reason)
+    log.info("inference %s: %d pairs, %d rows, %d failed", method_key, summary.pairs_done, summary.rows,
+             len(summary.pairs_failed))
+    return summary
+
+
+def run_all_methods(
+    methods: Iterable[str] = METHODS, settings: Settings | None = None, **kwargs: Any
+) -> list[InferenceSummary]:
+    """Ours and every baseline; the classifier is skipped (with a log line) when none is trained."""
+    out = []
+    for method in methods:
+        if method == "classifier":
+            with session_scope((settings or get_settings()).resolved_database_url) as session:
+                if resolve_classifier(session, kwargs.get("classifier_id")) is None:
+                    log.warning("inference: no trained material classifier yet; skipping method 'classifier'")
+                    continue
+        out.append(run_inference(method, settings=settings, **kwargs))
+    return out

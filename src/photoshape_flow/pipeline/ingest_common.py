@@ -1,0 +1,238 @@
+"""Shared pieces of the four ingest stages: the summary, limits, hashing, splits, the material event.
+
+Every ingest stage follows one pattern per item: compute the content hash of the source files,
+skip the item when a row with the same natural key, hash and parameters is already `ok`
+("present"), otherwise process it, write blobs, then upsert the row in its own transaction
+("added" or "replaced"). Bad input becomes a `rejected` row (crashes and timeouts `failed`) with
+a one-line error, a summary line and a log line, and the batch goes on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.geometry.archive import ArchiveLimits
+from photoshape_flow.store import BlobStore
+
+logger = logging.getLogger(__name__)
+
+Progress = Callable[[str, int, int], None]
+"""progress(label, done, total): called after each item (label names the item just handled)."""
+
+MATERIAL_EVENT = "photoshape.material.added"
+MATERIAL_SET_RESOURCE = "photoshape.material-set"
+
+
+@dataclass
+class IngestSummary:
+    """What one ingest call did. Ids are row ids of the collection's table."""
+
+    kind: str
+    added: list[int] = field(default_factory=list)
+    present: list[int] = field(default_factory=list)
+    replaced: list[int] = field(default_factory=list)
+    rejected: list[tuple[str, str]] = field(default_factory=list)  # (path or label, reason)
+    duplicates: list[tuple[int, int]] = field(default_factory=list)  # exemplars: (id, duplicate of id)
+    warnings: list[tuple[str, str]] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # informational (e.g. previews)
+
+    @property
+    def new_material_ids(self) -> list[int]:
+        """Materials added by this call (empty for the other collections)."""
+        return list(self.added) if self.kind == "materials" else []
+
+    @property
+    def total(self) -> int:
+        return len(self.added) + len(self.present) + len(self.replaced) + len(self.rejected)
+
+    def reject(self, label: str, reason: str) -> None:
+        self.rejected.append((label, reason))
+        logger.warning("%s: %s", label, reason)
+
+    def warn(self, label: str, message: str) -> None:
+        self.warnings.append((label, message))
+        logger.info("%s: %s", label, message)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "kind": self.kind,
+            "added": self.added,
+            "present": self.present,
+            "replaced": self.replaced,
+            "rejected": [list(r) for r in self.rejected],
+            "duplicates": [list(d) for d in self.duplicates],
+            "warnings": [list(w) for w in self.warnings],
+        }
+
+
+@dataclass(frozen=True)
+class IngestLimits:
+    """Input limits; anything over them is rejected with the limit named in the reason."""
+
+    max_shape_bytes: int = 100 * 1024 * 1024  # the original skipped ShapeNet OBJs over 50 MB
+    max_faces: int = 500_000
+    max_image_pixels: int = 64_000_000
+    max_image_bytes: int = 256 * 1024 * 1024
+    max_texture_pixels: int = 64 * 1024 * 1024
+    timeout_s: float = 600.0  # per shape / envmap in the isolated worker
+    archive: ArchiveLimits = field(default_factory=ArchiveLimits)
+
+    @classmethod
+    def from_settings(cls, settings: Any) -> IngestLimits:
+        """The limits configured through PHOTOSHAPE_INGEST_* settings."""
+        return cls(
+            max_shape_bytes=int(settings.ingest_max_file_mb * 1024 * 1024),
+            max_faces=int(settings.ingest_max_faces),
+            max_image_pixels=int(settings.ingest_max_image_megapixels * 1_000_000),
+        )
+
+
+def stable_hash(payload: Any) -> str:
+    """sha256 of a JSON rendering with sorted keys (params hashes)."""
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def files_hash(paths: Iterable[Path], base: Path | None = None) -> str:
+    """sha256 over (relative name, sha256 of bytes) of several files, in the given order."""
+    from photoshape_flow.store import sha256_file
+
+    digest = hashlib.sha256()
+    for path in paths:
+        name = path.name
+        if base is not None:
+            try:
+                name = path.resolve().relative_to(base.resolve()).as_posix()
+            except ValueError:
+                pass
+        digest.update(name.encode())
+        digest.update(b"\0")
+        digest.update(bytes.fromhex(sha256_file(path)))
+    return digest.hexdigest()
+
+
+def hash_fraction(*parts: str) -> float:
+    """A deterministic number in [0, 1) from strings (used for train/val splits)."""
+    digest = hashlib.sha256("/".join(parts).encode()).hexdigest()
+    return int(digest[:12], 16) / float(1 << 48)
+
+
+def split_for(source: str, source_id: str, val_fraction: float = 0.1) -> str:
+    """Deterministic 90/10 train/val split from (source, source_id)."""
+    return "val" if hash_fraction(source, source_id) < val_fraction else "train"
+
+
+def resolve_settings(settings: Settings | None) -> Settings:
+    return settings or get_settings()
+
+
+def store_for(settings: Settings) -> BlobStore:
+    return BlobStore(settings.blob_root)
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as one short line (first line of its message, type name if empty)."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return text[:500]
+
+
+def iter_files(paths: Iterable[str | Path], suffixes: set[str]) -> Iterator[tuple[Path, str | None]]:
+    """Files under the given paths with one of `suffixes` (folders recursively, sorted).
+
+    Yields (path, None) for usable files and (path, reason) for given paths that are missing or
+    have the wrong type; files of other types inside folders are skipped silently.
+    """
+    for given in paths:
+        path = Path(given)
+        if not path.exists():
+            yield path, "no such file or folder"
+            continue
+        if path.is_dir():
+            for found in sorted(p for p in path.rglob("*") if p.is_file() and p.suffix.lower() in suffixes):
+                yield found, None
+            continue
+        if path.suffix.lower() not in suffixes:
+            yield path, f"unsupported file type {path.suffix or '(none)'!r} (expected {', '.join(sorted(suffixes))})"
+            continue
+        yield path, None
+
+
+def _prefect_api_url() -> str | None:
+    """The API URL Prefect itself is configured with (None when it would use an ephemeral server)."""
+    try:
+        from prefect.settings import PREFECT_API_URL
+
+        return PREFECT_API_URL.value() or None
+    except Exception:
+        return None
+
+
+def _send_event(api_url: str, event: str, resource: dict[str, str], payload: dict[str, Any],
+                timeout_s: float = 15.0) -> None:
+    """Deliver one event to the Prefect API at `api_url` and wait for it (bounded by `timeout_s`).
+
+    Used when Prefect itself is not configured for that API (e.g. the CLI with only
+    PHOTOSHAPE_PREFECT_API_URL set): `prefect.events.emit_event` would then start an ephemeral
+    server instead. Runs in its own thread and event loop, so it works inside running loops too.
+    """
+    import asyncio
+    import threading
+
+    from prefect.events import Event
+    from prefect.events.clients import PrefectEventsClient
+
+    async def send() -> None:
+        async with PrefectEventsClient(api_url=api_url, reconnection_attempts=1) as client:
+            await client.emit(Event(event=event, resource=resource, payload=payload))
+
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            asyncio.run(asyncio.wait_for(send(), timeout_s))
+        except BaseException as exc:  # reported to the caller below
+            errors.append(exc)
+
+    thread = threading.Thread(target=run, name="photoshape-event", daemon=True)
+    thread.start()
+    thread.join(timeout_s + 5.0)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer from {api_url} within {timeout_s:g} s")
+    if errors:
+        raise errors[0]
+
+
+def emit_material_event(settings: Settings, material_ids: list[int]) -> bool:
+    """Emit one `photoshape.material.added` Prefect event for a committed batch of new materials.
+
+    Only when a Prefect API is configured (`settings.effective_prefect_api_url`). When Prefect is
+    configured for that same API (flows, deployments) the event goes through
+    `prefect.events.emit_event`; otherwise it is sent directly to the configured URL. A failure is
+    logged, never raised: ingest must not fail because the orchestrator is down. Prefect is
+    imported lazily so the pipeline layer stays importable without it. Returns whether the event
+    was handed over.
+    """
+    api_url = settings.effective_prefect_api_url
+    if not material_ids or not api_url:
+        return False
+    resource = {"prefect.resource.id": MATERIAL_SET_RESOURCE}
+    payload = {"count": len(material_ids), "material_ids": list(material_ids)}
+    try:
+        if _prefect_api_url() == api_url:
+            from prefect.events import emit_event
+
+            if emit_event(event=MATERIAL_EVENT, resource=resource, payload=payload) is None:
+                raise RuntimeError("Prefect did not accept the event (events disabled?)")
+        else:
+            _send_event(api_url, MATERIAL_EVENT, resource, payload)
+    except Exception as exc:  # events are best effort
+        logger.warning("could not emit %s event to %s: %s", MATERIAL_EVENT, api_url, one_line(exc))
+        return False
+    logger.info("emitted %s (%d materials)", MATERIAL_EVENT, len(material_ids))
+    return True

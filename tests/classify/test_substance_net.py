@@ -1,0 +1,113 @@
+"""Substance segmentation network: shapes, overfitting a tiny batch, resumable epochs, prediction."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
+from photoshape_flow.classify.substance_train import (
+    SubstanceData,
+    checkpoint_from_bytes,
+    checkpoint_to_bytes,
+    confusion_matrix,
+    get_config,
+    load_model,
+    metrics_from_confusion,
+    predict_substances,
+    train_substance_net,
+)
+
+COLOURS = {1: (120, 60, 30), 2: (40, 90, 160), 3: (170, 120, 70), 4: (150, 150, 160), 5: (30, 160, 60)}
+
+
+def _toy_data(n: int, size: int = 32, seed: int = 0) -> SubstanceData:
+    """White background with two rectangles whose colour encodes their substance label."""
+    rng = np.random.default_rng(seed)
+    images, labels = [], []
+    for _ in range(n):
+        image = np.full((size, size, 3), 255, np.uint8)
+        label = np.zeros((size, size), np.uint8)
+        for _rect in range(2):
+            k = int(rng.integers(1, NUM_CLASSES))
+            y0, x0 = rng.integers(0, size // 2, 2)
+            h, w = rng.integers(size // 4, size // 2, 2)
+            noise = rng.integers(-15, 16, (h, w, 3))
+            image[y0 : y0 + h, x0 : x0 + w] = np.clip(np.array(COLOURS[k]) + noise, 0, 255)
+            label[y0 : y0 + h, x0 : x0 + w] = k
+        images.append(image)
+        labels.append(label)
+    return SubstanceData(images=images, labels=labels)
+
+
+def test_network_output_shape_any_size() -> None:
+    model = SubstanceNet(width=8).eval()
+    with torch.no_grad():
+        out = model(torch.rand(2, 3, 40, 56))
+    assert out.shape == (2, NUM_CLASSES, 40, 56)
+
+
+def test_overfits_a_tiny_batch() -> None:
+    torch.set_num_threads(2)
+    data = _toy_data(4)
+    config = get_config("tiny", epochs=1, iters_per_epoch=60, lr=1e-2, jitter=0.0, crop_scale=(1.0, 1.0), flip=False)
+    result = train_substance_net(data, None, config)
+    metrics = result.checkpoint["metrics"]
+    assert metrics["loss_last"] < 0.5 * metrics["loss_first"]
+    assert metrics["split"] == "train"
+    assert metrics["pixel_accuracy"] > 0.8
+
+
+def test_resume_continues_from_the_last_epoch() -> None:
+    data, val = _toy_data(4, seed=1), _toy_data(2, seed=2)
+    config = replace(get_config("tiny"), epochs=3, iters_per_epoch=2)
+    saved: list[bytes] = []
+
+    class Interrupt(Exception):
+        pass
+
+    def stop_after_two(checkpoint: dict, metrics: dict) -> None:
+        saved.append(checkpoint_to_bytes(checkpoint))
+        if checkpoint["epoch"] == 2:
+            raise Interrupt
+
+    with pytest.raises(Interrupt):
+        train_substance_net(data, val, config, on_epoch=stop_after_two)
+    assert len(saved) == 2
+
+    resumed = train_substance_net(data, val, config, checkpoint=checkpoint_from_bytes(saved[-1]))
+    assert resumed.epochs_run == [3]
+    assert [h["epoch"] for h in resumed.history] == [1, 2, 3]
+    assert resumed.checkpoint["metrics"]["split"] == "val"
+
+    # the resumed run equals an uninterrupted one (per-epoch seeded streams, schedule from the iteration)
+    straight = train_substance_net(data, val, config)
+    for name, tensor in straight.checkpoint["model"].items():
+        torch.testing.assert_close(tensor, resumed.checkpoint["model"][name], rtol=1e-4, atol=1e-5)
+
+    # finished checkpoints train nothing more
+    again = train_substance_net(data, val, config, checkpoint=resumed.checkpoint)
+    assert again.epochs_run == []
+
+
+def test_predict_substances_returns_probabilities_at_image_size() -> None:
+    data = _toy_data(2)
+    result = train_substance_net(data, None, get_config("tiny", epochs=1, iters_per_epoch=1))
+    model = load_model(checkpoint_from_bytes(checkpoint_to_bytes(result.checkpoint)))
+    probs = predict_substances(model, data.images[0][:30, :30], size=32)
+    assert probs.shape == (NUM_CLASSES, 30, 30)
+    np.testing.assert_allclose(probs.sum(axis=0), 1.0, atol=1e-4)
+
+
+def test_metrics_from_confusion() -> None:
+    target = np.array([[0, 0, 1, 1]])
+    pred = np.array([[0, 1, 1, 1]])
+    metrics = metrics_from_confusion(confusion_matrix(pred, target))
+    assert metrics["pixel_accuracy"] == pytest.approx(0.75)
+    assert metrics["foreground_accuracy"] == pytest.approx(1.0)
+    assert metrics["iou"]["background"] == pytest.approx(0.5)
+    assert metrics["iou"]["leather"] == pytest.approx(2 / 3)
+    assert metrics["iou"]["wood"] is None

@@ -1,0 +1,87 @@
+"""The static gallery: every page loads in headless Chromium with all images and no errors, and sorts."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tests.export.tiny import write_png
+
+from photoshape_flow.export.gallery import GalleryEntry, GalleryMaterial, GalleryPart, write_gallery
+
+
+def _entries(tmp_path: Path) -> tuple[list[GalleryEntry], list[GalleryMaterial]]:
+    rng = np.random.default_rng(1)
+    img = tmp_path / "src"
+    img.mkdir()
+    export = tmp_path / "export"
+    (export / "mitsuba" / "meshes").mkdir(parents=True)
+    (export / "mitsuba" / "scene.xml").write_text("<scene/>")
+    (export / "mitsuba" / "meshes" / "part_0001.ply").write_bytes(b"ply\n")
+    (export / "photoshape.glb").write_bytes(b"glTF")
+    (export / "assignment.json").write_text("{}")
+    entries = []
+    for pair_id, score, hog, grade in ((1, 0.4, 9.0, "wrong_color"), (2, 0.9, 12.0, "good"), (3, 0.7, 8.5, None)):
+        renders = [(view, write_png(img / f"{pair_id}-{view}.png", rng.integers(0, 255, (24, 24, 3), np.uint8)))
+                   for view in ("exemplar", "turntable-00")]
+        entries.append(GalleryEntry(
+            pair_id=pair_id, method_key="classifier:1", shape_name=f"chair <{pair_id}>", exemplar_name="photo & co",
+            parts=[GalleryPart(1, "seat", 10, "oak_01", "wood", score),
+                   GalleryPart(2, "leg", None, None, "metal", None, unobserved=True)],
+            exemplar_image=write_png(img / f"ex{pair_id}.png", rng.integers(0, 255, (32, 32, 3), np.uint8)),
+            builtin_image=write_png(img / f"b{pair_id}.png", rng.integers(0, 255, (24, 24, 3), np.uint8)),
+            renders=renders, hog_distance=hog, alignment_iou=0.5 + pair_id / 10, grade=grade,
+            grade_note="too dark" if grade == "wrong_color" else None,
+            downloads={"glb": export / "photoshape.glb", "xml": export / "mitsuba" / "scene.xml",
+                       "assignment": export / "assignment.json"},
+            licenses=[{"role": "shape", "name": "chair", "license": "CC-BY-4.0", "attribution": "someone",
+                       "source_url": "https://example.org/chair"}],
+        ))
+    materials = [GalleryMaterial(10, "oak_01", "wood", preview=renders[0][1], license="CC0-1.0")]
+    return entries, materials
+
+
+def test_gallery_files_and_escaping(tmp_path):
+    entries, materials = _entries(tmp_path)
+    index = write_gallery(tmp_path / "site", entries, materials)
+    text = index.read_text()
+    assert "chair &lt;2&gt;" in text and "<2>" not in text  # names are escaped
+    assert "http" not in text.replace("https://example.org", "")  # no CDN
+    page = (tmp_path / "site" / "pairs" / "2-classifier-1.html").read_text()
+    assert "90.0%" in page and "built-in" in page and "CC-BY-4.0" in page
+    with zipfile.ZipFile(tmp_path / "site" / "downloads" / "2-classifier-1" / "xml.zip") as zf:
+        assert sorted(zf.namelist()) == ["xml/meshes/part_0001.ply", "xml/scene.xml"]
+
+
+@pytest.mark.browser
+def test_gallery_loads_in_chromium_and_sorts(tmp_path):
+    from photoshape_flow.export.browser import check_pages, problems
+    from photoshape_flow.export.node_tools import ProgramMissing
+
+    entries, materials = _entries(tmp_path)
+    index = write_gallery(tmp_path / "site", entries, materials)
+    pages = [index, *sorted((tmp_path / "site" / "pairs").glob("*.html")), tmp_path / "site" / "materials.html"]
+    order = "Array.from(document.querySelectorAll('#photoshapes tbody tr'), r => r.dataset.pair).join(',')"
+    click = "document.querySelector('th[data-key=\"hog\"]').click()"
+    filtered = "(document.getElementById('grade-filter').value='good', " \
+               "document.getElementById('grade-filter').dispatchEvent(new Event('change')), " \
+               "document.getElementById('count').textContent)"
+    try:
+        report = check_pages(pages, screenshot=tmp_path / "gallery.png",
+                             evaluate=[order, click, order, click, order, filtered])
+    except ProgramMissing as exc:
+        pytest.skip(str(exc))
+    assert problems(report) == []
+    first = report["pages"][0]
+    assert first["title"] == "PhotoShapes"
+    assert len(first["images"]) == 6 and all(i["natural_width"] == 24 or i["natural_width"] == 32
+                                             for i in first["images"])
+    pair_images = sum(len(p["images"]) for p in report["pages"][1:4])
+    assert pair_images == 3 * 4  # exemplar, built-in and two renders per pair page
+    by_score, _, by_hog_asc, _, by_hog_desc, good_count = first["evaluated"]
+    assert by_score == "2,3,1"  # initial order: best score first
+    assert by_hog_asc == "3,1,2" and by_hog_desc == "2,1,3"
+    assert good_count == "1"
+    assert (tmp_path / "gallery.png").stat().st_size > 1000

@@ -1,0 +1,22 @@
+"""The isolated worker: results and exceptions come back, crashes and hangs cost one call only."""
+
+from __future__ import annotations
+
+import pytest
+from tests.geometry.makers import add, crash_process, hang, raise_value_error
+
+from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError, WorkerTimeoutError
+
+
+def test_results_exceptions_crash_and_timeout_in_one_worker() -> None:
+    with IsolatedWorker(timeout_s=60) as worker:
+        assert worker.call(add, 2, 3) == 5
+        with pytest.raises(ValueError, match="boom"):
+            worker.call(raise_value_error, "boom")
+        assert worker.call(add, 1, 1) == 2  # the child survived the exception
+        with pytest.raises(WorkerCrashedError, match="SIGSEGV"):
+            worker.call(crash_process)
+        assert worker.call(add, 4, 4) == 8  # a fresh child after the crash
+        with pytest.raises(WorkerTimeoutError, match="timed out"):
+            worker.call(hang, timeout_s=1.0)
+        assert worker.call(add, 5, 5) == 10

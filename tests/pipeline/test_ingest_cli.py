@@ -1,0 +1,51 @@
+"""`photoshape ingest ...`: summary table, one line per rejection, --strict, unmigrated database."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from tests.geometry.makers import write_chair_obj, write_png
+from tests.imaging.test_exemplar import photo
+from tests.imaging.test_hdr import sky, write_hdr
+from typer.testing import CliRunner
+
+from photoshape_flow.cli import app
+
+runner = CliRunner()
+
+
+def test_ingest_commands(db_url: str, tmp_path: Path) -> None:
+    write_chair_obj(tmp_path / "shapes")
+    (tmp_path / "shapes" / "broken.obj").write_text("v 0 0 0\n")
+    result = runner.invoke(app, ["ingest", "shapes", str(tmp_path / "shapes"), "--category", "chair", "--no-isolate"])
+    assert result.exit_code == 0, result.output
+    assert "ingest shapes" in result.output and "already present" in result.output
+    assert "broken.obj: no faces" in result.output.replace("\n", "")
+
+    result = runner.invoke(app, ["ingest", "shapes", str(tmp_path / "shapes"), "--no-isolate", "--strict"])
+    assert result.exit_code == 2  # the broken file is rejected again
+
+    write_png(tmp_path / "photos" / "p.png", photo())
+    result = runner.invoke(app, ["ingest", "exemplars", str(tmp_path / "photos"), "--size", "64"])
+    assert result.exit_code == 0, result.output
+
+    write_png(tmp_path / "mats" / "wood_a" / "albedo.png", np.zeros((4, 4, 3), np.uint8))
+    result = runner.invoke(app, ["ingest", "materials", str(tmp_path / "mats"), "--no-previews"])
+    assert result.exit_code == 0, result.output
+
+    (tmp_path / "env").mkdir()
+    write_hdr(tmp_path / "env" / "a.hdr", sky())
+    result = runner.invoke(app, ["ingest", "envmaps", str(tmp_path / "env"), "--split", "val"])
+    assert result.exit_code == 0, result.output
+
+    result = runner.invoke(app, ["ingest", "envmaps", str(tmp_path / "env"), "--split", "test"])
+    assert result.exit_code != 0 and "--split must be train or val" in result.output
+
+    result = runner.invoke(app, ["ingest", "shapes", str(tmp_path), "--name-filter", "("])
+    assert result.exit_code != 0 and "invalid --name-filter" in result.output
+
+
+def test_unmigrated_database_is_reported(settings_env: Path, tmp_path: Path) -> None:
+    result = runner.invoke(app, ["ingest", "envmaps", str(tmp_path)])
+    assert result.exit_code == 1 and "photoshape db upgrade" in result.output

@@ -1,0 +1,213 @@
+"""Publish stage on a tiny database: renders, exports, resumability, failures, grades, gallery."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+from tests.export.tiny import make_envmap, make_material_maps, make_tiny_shape
+
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+
+
+def seed(url: str, store, tmp_path: Path) -> dict[str, int]:  # type: ignore[no-untyped-def]
+    """One shape (2 parts), two exemplars, two SVBRDF materials, two envmaps, two pairs with assignments.
+
+    Pair 'good' is complete; pair 'broken' assigns a material whose map blob is missing from the store.
+    """
+    rng = np.random.default_rng(0)
+    mesh = make_tiny_shape()
+    maps = make_material_maps(tmp_path / "maps")
+    ids: dict[str, int] = {}
+    with session_scope(url) as s:
+        shape = m.Shape(source="test", source_id="tiny", name="tiny chair", mesh_blob=store.put_bytes(
+            mesh.to_npz_bytes(), "npz"), num_parts=2, license="CC-BY-4.0", attribution="Shape Author",
+            source_url="https://example.org/shape")
+        s.add(shape)
+        s.flush()
+        parts = []
+        for p in mesh.parts:
+            row = m.Part(shape_id=shape.id, index=p.index, name=p.name, num_faces=len(p.faces),
+                         uv_density=p.uv_density, builtin_material=p.builtin_material)
+            s.add(row)
+            s.flush()
+            parts.append(row.id)
+        materials = {}
+        for name, substance, scale in (("oak_01", "wood", 0.25), ("steel_02", "metal", 0.5)):
+            row = m.Material(name=name, substance=substance, default_scale=scale, license="CC0-1.0",
+                             attribution=f"{name} author", params_hash=name,
+                             maps={ch: store.put_file(path) for ch, path in maps[name].items()})
+            s.add(row)
+            s.flush()
+            materials[name] = row.id
+        broken = m.Material(name="missing_03", substance="wood", maps={"albedo": "0" * 64 + ".png"}, params_hash="x")
+        s.add(broken)
+        for name in ("outdoor_sky", "studio_soft"):
+            s.add(m.Envmap(name=name, blob=store.put_image(make_envmap(), "exr"), width=32, height=16))
+        classifier = m.Classifier(name="clf", kind="material", architecture="resnet34")
+        s.add(classifier)
+        s.flush()
+        for key in ("good", "broken"):
+            exemplar = m.Exemplar(source="test", source_id=f"photo_{key}", name=f"photo {key}",
+                                  image_blob=store.put_image(rng.integers(0, 255, (32, 32, 3), np.uint8)),
+                                  license="CC0-1.0", attribution="Photographer")
+            s.add(exemplar)
+            s.flush()
+            pair = m.Pair(shape_id=shape.id, exemplar_id=exemplar.id, rank=1, distance=9.5, azimuth=0.4,
+                          elevation=0.3, fov=50.0, camera_distance=2.2)
+            s.add(pair)
+            s.flush()
+            ids[key] = pair.id
+            first = materials["oak_01"] if key == "good" else broken.id
+            for rank, (part_id, material_id, score) in enumerate(
+                [(parts[0], first, 0.8), (parts[1], materials["steel_02"], 0.6),
+                 (parts[0], materials["steel_02"], 0.1)]
+            ):
+                s.add(m.Assignment(pair_id=pair.id, part_id=part_id, method="classifier",
+                                   classifier_id=classifier.id, method_key=f"classifier:{classifier.id}",
+                                   rank=1 if rank < 2 else 2, material_id=material_id, score=score,
+                                   substance="wood" if material_id != materials["steel_02"] else "metal",
+                                   params={"uv": {"scale": 1.2, "rotation": 0.3, "offset": [0.1, 0.0]}}
+                                   if rank == 0 else {}))
+            s.add(m.Alignment(pair_id=pair.id, method="flow-crf", iou_crf=0.77))
+        ids["classifier"] = classifier.id
+    return ids
+
+
+def _renderings(url: str) -> dict[tuple[str, str], m.Rendering]:
+    with session_scope(url) as s:
+        return {(r.kind, r.key): r for r in s.execute(sa.select(m.Rendering)).scalars()}
+
+
+@pytest.mark.render
+def test_publish_renders_exports_and_resumes(db_url, store, tmp_path):
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.export.node_tools import ProgramMissing
+    from photoshape_flow.export.validate import errors, validate_gltf
+    from photoshape_flow.pipeline.publish import export_manifest, run_publish
+
+    ids = seed(db_url, store, tmp_path)
+    mk = f"classifier:{ids['classifier']}"
+    summary = run_publish(views=2, size=16, spp=2, formats=("glb", "xml", "obj"))
+    assert summary.candidates == 2 and summary.envmap == "studio_soft"
+    assert summary.rendered == 4 and summary.exported == 1  # good pair: exemplar + 2 turntable + builtin
+    assert summary.failed == 1 and "missing" in summary.errors[0]  # broken pair recorded, batch went on
+    rows = _renderings(db_url)
+    good = ids["good"]
+    assert {k for k, r in rows.items() if r.status == "ok"} == {
+        ("photoshape", f"{good}/{mk}/exemplar"), ("photoshape", f"{good}/{mk}/turntable-00"),
+        ("photoshape", f"{good}/{mk}/turntable-01"), ("builtin", f"{good}/exemplar")}
+    failed = rows[("photoshape", f"{ids['broken']}/{mk}/exemplar")]
+    assert failed.status == "failed" and "missing" in failed.error
+    row = rows[("photoshape", f"{good}/{mk}/exemplar")]
+    assert row.pair_id == good and row.classifier_id == ids["classifier"] and row.params_hash
+    image = store.load_image(row.blobs["srgb"])
+    assert image.shape == (16, 16, 3) and (image < 250).any()  # the shape is in view on white
+    builtin = store.load_image(rows[("builtin", f"{good}/exemplar")].blobs["srgb"])
+    assert not np.array_equal(image, builtin)  # other materials, other pixels
+
+    manifest = export_manifest(good, mk)
+    assert manifest["status"] == "ok" and set(manifest["files"]) == {"glb", "xml", "obj", "assignment"}
+    folder = get_settings().data_root / "exports" / mk.replace(":", "-") / str(good)
+    sidecar = json.loads((folder / "assignment.json").read_text())
+    assert [p["material"]["name"] for p in sidecar["parts"]] == ["oak_01", "steel_02"]  # rank 1 only
+    assert sidecar["parts"][0]["uv"]["transform"]["scale"] == pytest.approx(1.2)
+    assert sidecar["license_summary"] == ["CC-BY-4.0", "CC0-1.0"] and sidecar["unknown_licenses"] == 1
+    try:
+        assert errors(validate_gltf(folder / "photoshape.glb")) == []
+    except ProgramMissing:  # no node here: the validator's own tests skip with the reason
+        pass
+
+    again = run_publish(views=2, size=16, spp=2, formats=("glb", "xml", "obj"))
+    assert (again.rendered, again.skipped, again.exported, again.export_skipped) == (0, 4, 0, 1)
+    assert again.failed == 1  # still broken, retried
+    # three turntable views: view 1 moves (2 pi / 3 instead of pi) and view 2 is new; the rest is kept
+    more = run_publish(views=3, size=16, spp=2, formats=("glb", "xml", "obj"))
+    assert (more.rendered, more.skipped) == (2, 3)
+
+
+def test_grade_rows_labels_and_sql(db_url, store, tmp_path):
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+    from photoshape_flow.pipeline.publish import record_grade
+
+    ids = seed(db_url, store, tmp_path)
+    runner = CliRunner()
+    result = runner.invoke(app, ["grade", str(ids["good"]), "good", "--note", "close match"])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(app, ["grade", str(ids["good"]), "wrong_color", "--grader", "bob"])
+    assert result.exit_code == 0, result.output
+    bad = runner.invoke(app, ["grade", str(ids["good"]), "great"])
+    assert bad.exit_code == 1 and "valid grades: good, acceptable" in bad.output
+    assert len([line for line in bad.output.strip().splitlines() if line.strip()]) <= 3
+    missing = runner.invoke(app, ["grade", "999", "good"])
+    assert missing.exit_code == 1 and "pair 999" in missing.output
+    with session_scope(db_url) as s:
+        record_grade(s, ids["good"], "acceptable", grader="user")  # same grader: replaced, not added
+        rows = s.execute(sa.text(
+            "SELECT DISTINCT g.grader, g.label, g.note FROM grade g "
+            "JOIN photoshape_candidate c ON c.pair_id = g.pair_id ORDER BY g.grader")).all()
+        with pytest.raises(ValueError, match="unknown grade"):
+            record_grade(s, ids["good"], "meh")
+    assert [tuple(r) for r in rows] == [("bob", "wrong_color", None), ("user", "acceptable", None)]
+
+
+@pytest.mark.render
+@pytest.mark.browser
+def test_gallery_of_published_candidates(db_url, store, tmp_path):
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+    from photoshape_flow.export.browser import check_pages, problems
+    from photoshape_flow.export.node_tools import ProgramMissing
+    from photoshape_flow.pipeline.publish import record_grade, run_publish
+
+    ids = seed(db_url, store, tmp_path)
+    run_publish(views=1, size=16, spp=2, formats=("glb", "obj"))
+    with session_scope(db_url) as s:
+        record_grade(s, ids["good"], "acceptable", note="seat a bit dark")
+    result = CliRunner().invoke(app, ["gallery", str(tmp_path / "site")])
+    assert result.exit_code == 0 and "2 PhotoShape page(s)" in result.output, result.output
+    index = tmp_path / "site" / "index.html"
+    html = index.read_text()
+    assert "tiny chair" in html and "acceptable" in html and "CC-BY-4.0" in html
+    pages = sorted((tmp_path / "site" / "pairs").glob("*.html"))
+    assert len(pages) == 2  # the broken candidate is listed too, without renders
+    good_page = next(p for p in pages if p.name.startswith(f"{ids['good']}-"))
+    text = good_page.read_text()
+    assert "seat a bit dark" in text and "oak_01" in text and "80.0%" in text and "photoshape.glb" in text
+    try:
+        report = check_pages([index, good_page], screenshot=tmp_path / "gallery.png")
+    except ProgramMissing as exc:
+        pytest.skip(str(exc))
+    assert problems(report) == []
+    # exemplar, built-in, exemplar view and one turntable view
+    assert len(report["pages"][1]["images"]) == 4
+
+
+def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp_path):
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+
+    ids = seed(db_url, store, tmp_path)
+    runner = CliRunner()
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["export", str(ids["good"]), "--out", str(out), "--format", "glb,obj", "--json"])
+    assert result.exit_code == 0, result.output
+    folder = out / f"{ids['good']}-classifier-{ids['classifier']}"
+    assert (folder / "photoshape.glb").is_file() and (folder / "obj" / "photoshape.obj").is_file()
+    assert json.loads((folder / "assignment.json").read_text())["pair_id"] == ids["good"]
+    # every candidate: the broken one is reported, the good one still written
+    result = runner.invoke(app, ["export", "--out", str(tmp_path / "all"), "--format", "glb"])
+    assert result.exit_code == 1 and "missing" in result.output
+    assert (tmp_path / "all" / folder.name / "photoshape.glb").is_file()
+    bad = runner.invoke(app, ["export", "--out", str(out), "--format", "glb,fbx"])
+    assert bad.exit_code == 1 and "unknown export format(s) fbx; valid: glb, gltf, xml, obj" in bad.output
+    none = runner.invoke(app, ["export", "--out", str(out), "--method", "color-match"])
+    assert none.exit_code == 1 and "no candidates" in none.output

@@ -1,0 +1,122 @@
+"""Substances stage: bootstrap renders -> substance network -> PartSubstance rows, idempotent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+from tests.synth.collection import seed_collection
+
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.pipeline.substances import run_substances
+from photoshape_flow.vocab import SUBSTANCE_LABELS, SUBSTANCES
+
+EXEMPLAR = 48
+
+
+def _count(url: str, model: type) -> int:
+    with session_scope(url) as session:
+        return int(session.execute(sa.select(sa.func.count()).select_from(model)).scalar_one())
+
+
+def _add_alignments(url: str, store, col) -> int:  # type: ignore[no-untyped-def]
+    """Exemplars rendered from each pair's camera and their exact part maps as flow-crf alignments.
+
+    The first pair's map loses its legs (as if the photo cropped them): that part must come out
+    unobserved. Returns the part id of those legs.
+    """
+    from photoshape_flow.geometry.mesh import ShapeMesh
+    from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec, Renderer
+
+    renderer = Renderer(resolve=store.resolve)
+    hidden_part = -1
+    with session_scope(url) as session:
+        envmap = session.get(m.Envmap, next(iter(col.envmaps)))
+        for n, (pair_id, shape_id) in enumerate(sorted(col.pairs.items())):
+            pair = session.get(m.Pair, pair_id)
+            mesh = ShapeMesh.from_npz_bytes(store.read_bytes(session.get(m.Shape, shape_id).mesh_blob))
+            camera = Camera(pair.azimuth, pair.elevation, pair.camera_distance, pair.fov)
+            materials = [
+                MaterialSpec(name="fabric", params={"albedo": [0.15, 0.25, 0.65], "roughness": 0.9}),
+                MaterialSpec(name="fabric", params={"albedo": [0.15, 0.25, 0.65], "roughness": 0.9}),
+                MaterialSpec(name="steel", params={"albedo": [0.75, 0.75, 0.78], "roughness": 0.3, "metallic": 1.0}),
+            ]
+            beauty = renderer.beauty(mesh, materials, camera, EnvmapSpec(store.resolve(envmap.blob)),
+                                     size=EXEMPLAR, spp=4)
+            part_map = renderer.part_ids(mesh, camera, size=EXEMPLAR)
+            if n == 0:
+                part_map[part_map == 3] = 0
+                hidden_part = col.parts[shape_id][2]
+            session.get(m.Exemplar, pair.exemplar_id).image_blob = store.put_image(beauty.srgb)
+            session.add(m.Alignment(pair_id=pair_id, method="flow-crf", crf_blob=store.put_array(part_map)))
+    return hidden_part
+
+
+@pytest.mark.render
+def test_substances_stage_end_to_end_and_idempotent(
+    db_url: str, store, monkeypatch: pytest.MonkeyPatch  # type: ignore[no-untyped-def]
+) -> None:
+    with session_scope(db_url) as session:
+        col = seed_collection(session, store, exemplar_size=EXEMPLAR)
+    hidden_part = _add_alignments(db_url, store, col)
+
+    # a run killed after the first epoch leaves a resumable checkpoint behind
+    from photoshape_flow.classify import substance_train
+
+    original = substance_train.train_substance_net
+
+    def interrupted(*args, on_epoch, **kwargs):  # type: ignore[no-untyped-def]
+        def save_then_die(checkpoint, metrics):  # type: ignore[no-untyped-def]
+            on_epoch(checkpoint, metrics)
+            raise KeyboardInterrupt
+
+        return original(*args, on_epoch=save_then_die, **kwargs)
+
+    monkeypatch.setattr(substance_train, "train_substance_net", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_substances(bootstrap_count=6, size=32, spp=2, train_config="tiny")
+    monkeypatch.setattr(substance_train, "train_substance_net", original)
+    with session_scope(db_url) as session:
+        (partial,) = session.execute(sa.select(m.Classifier)).scalars()
+    assert partial.epoch == 1 and partial.status == "training" and partial.checkpoint_blob
+
+    summary = run_substances(bootstrap_count=6, size=32, spp=2, train_config="tiny")
+    assert summary["bootstrap"]["rendered"] == 0 and summary["bootstrap"]["skipped"] == 6
+    assert summary["network"]["resumed_from_epoch"] == 1
+    assert summary["network"]["epochs_run"] == [2]
+    assert summary["part_substances"]["updated"] == 3 and summary["part_substances"]["failed"] == 0
+
+    with session_scope(db_url) as session:
+        (classifier,) = session.execute(sa.select(m.Classifier)).scalars()
+        rows = list(session.execute(sa.select(m.PartSubstance)).scalars())
+    assert classifier.kind == "substance" and classifier.status == "ok" and classifier.epoch == 2
+    assert store.exists(classifier.checkpoint_blob)
+    assert classifier.metrics["split"] == "val" and 0 <= classifier.metrics["pixel_accuracy"] <= 1
+    assert set(classifier.metrics["iou"]) == set(SUBSTANCE_LABELS)
+
+    assert len(rows) == 9
+    for row in rows:
+        assert row.classifier_id == classifier.id
+        if row.part_id == hidden_part:
+            assert not row.observed and row.substance is None and row.pixel_count == 0
+            continue
+        assert row.observed and row.substance in SUBSTANCES and row.pixel_count > 0
+        assert 0 < row.confidence <= 1
+        assert row.probs[row.substance] == pytest.approx(row.confidence)
+        assert sum(row.probs[s] for s in SUBSTANCES) == pytest.approx(1.0, abs=1e-6)
+        probs = store.load_array(row.probs["map_blob"])
+        assert probs.shape == (len(SUBSTANCE_LABELS), EXEMPLAR, EXEMPLAR)
+        np.testing.assert_allclose(probs.astype(np.float32).sum(axis=0), 1.0, atol=1e-2)
+
+    counts = {model: _count(db_url, model) for model in (m.Rendering, m.Classifier, m.PartSubstance)}
+    again = run_substances(bootstrap_count=6, size=32, spp=2, train_config="tiny")
+    assert again["bootstrap"]["rendered"] == 0
+    assert again["network"]["epochs_run"] == []
+    assert again["part_substances"]["updated"] == 0 and again["part_substances"]["skipped"] == 3
+    assert {model: _count(db_url, model) for model in counts} == counts
+    with session_scope(db_url) as session:
+        after = {r.id: r.updated_at for r in session.execute(sa.select(m.PartSubstance)).scalars()}
+        (classifier_after,) = session.execute(sa.select(m.Classifier)).scalars()
+    assert after == {r.id: r.updated_at for r in rows}
+    assert classifier_after.updated_at == classifier.updated_at

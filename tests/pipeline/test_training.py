@@ -1,0 +1,170 @@
+"""Stage "training": classifier rows from training renders, reuse, resume after a kill, fine-tune, retrieve."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import sqlalchemy as sa
+import typer
+from tests.classify.regiondata import render_arrays
+from typer.testing import CliRunner
+
+from photoshape_flow.classify import train as train_module
+from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.db.upsert import upsert
+from photoshape_flow.pipeline.training import load_material_classifier, run_training
+
+TOY = {"oak": ("wood", (150, 90, 40)), "denim": ("fabric", (40, 60, 170)), "steel": ("metal", (120, 120, 130))}
+
+
+def _add_materials(url: str, named: dict[str, tuple[str, tuple[int, int, int]]]) -> dict[int, tuple]:
+    with session_scope(url) as session:
+        ids = upsert(session, Material, [{"name": n, "substance": s} for n, (s, _) in named.items()], key=["name"])
+    return dict(zip(ids, named.values(), strict=True))
+
+
+def _add_renders(url: str, store, materials: dict[int, tuple], count: int, prefix: str, val_every: int = 4) -> None:
+    rows = []
+    for i in range(count):
+        image, id_map = render_arrays(i, 48, materials, seed=len(prefix))
+        rows.append({
+            "kind": "training", "key": f"{prefix}/{i:04d}", "split": "val" if i % val_every == 0 else "train",
+            "status": "ok", "params": {},
+            "blobs": {"beauty": store.put_image(image), "material_ids": store.put_image(id_map)},
+        })
+    with session_scope(url) as session:
+        upsert(session, Rendering, rows, key=["kind", "key"])
+
+
+def _classifier(url: str, classifier_id: int) -> Classifier:
+    with session_scope(url) as session:
+        row = session.get(Classifier, classifier_id)
+        session.expunge(row)
+        return row
+
+
+def test_training_writes_an_ok_classifier_with_table4_metrics_and_is_idempotent(db_url: str, store) -> None:
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 10, "a")
+    classifier_id = run_training("tiny")
+    row = _classifier(db_url, classifier_id)
+    assert row.status == "ok" and row.kind == "material" and row.architecture == "resnet18-w8"
+    assert row.materials == [0, *sorted(materials)] and row.material_set_hash
+    assert row.epoch == 2 and row.checkpoint_blob and store.exists(row.checkpoint_blob)
+    # superseded per-epoch resume checkpoints are deleted; only the slim final one stays
+    assert [r for r in store.iter_refs() if r.endswith(".pt")] == [row.checkpoint_blob]
+    for key in ("mtl@1", "mtl@5", "sub@1", "sub-mtl@1"):
+        assert 0.0 <= row.metrics[key] <= 1.0
+    assert row.metrics["val_renderings"] == 3 and row.metrics["val_source"] == "split"
+    assert len(row.metrics["history"]) == 2
+    with session_scope(db_url) as session:
+        metrics = set(session.scalars(sa.select(Evaluation.metric).where(Evaluation.run == row.name)))
+    assert metrics == {"mtl@1", "mtl@5", "sub@1", "sub-mtl@1"}
+
+    assert run_training("tiny") == classifier_id  # same config, materials and data: reused
+    with session_scope(db_url) as session:
+        assert session.scalar(sa.select(sa.func.count()).select_from(Classifier)) == 1
+
+    _, classifier = load_material_classifier()
+    assert classifier.materials == sorted(materials)
+
+
+def test_killed_training_resumes_from_its_checkpoint(db_url: str, store, monkeypatch: pytest.MonkeyPatch) -> None:
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 8, "a")
+    real = train_module.train_classifier
+
+    def killed_after_one_epoch(*args, **kwargs):  # type: ignore[no-untyped-def]
+        real(*args, **kwargs, stop_after_epochs=1)
+        raise RuntimeError("worker killed")
+
+    monkeypatch.setattr(train_module, "train_classifier", killed_after_one_epoch)
+    with pytest.raises(RuntimeError, match="killed"):
+        run_training("tiny")
+    with session_scope(db_url) as session:
+        (row,) = session.scalars(sa.select(Classifier)).all()
+        session.expunge(row)
+    assert row.status == "failed" and "worker killed" in row.error and row.epoch == 1
+    first_epoch = row.metrics["history"][0]
+
+    monkeypatch.setattr(train_module, "train_classifier", real)
+    assert run_training("tiny") == row.id
+    done = _classifier(db_url, row.id)
+    assert done.status == "ok" and done.epoch == 2 and done.error is None
+    assert done.metrics["history"][0] == first_epoch  # continued, not restarted
+
+
+def test_new_materials_fine_tune_the_previous_classifier(db_url: str, store) -> None:
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 8, "a")
+    first = run_training("tiny")
+    new = _add_materials(db_url, {"walnut": ("wood", (90, 50, 20))})
+    _add_renders(db_url, store, {**materials, **new}, 8, "bb")
+    second = run_training("tiny")
+    assert second != first
+    row = _classifier(db_url, second)
+    assert row.parent_id == first and row.config["finetune"] is True
+    assert row.epoch == 1  # tiny's finetune_epochs
+    assert row.materials == [0, *sorted(materials), *new]
+    assert row.metrics["finetuned_from"] == first
+
+
+def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path: Path) -> None:
+    from photoshape_flow.cli import retrieve_cmd
+
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 6, "a")
+    classifier_id = run_training("tiny")
+    image, id_map = render_arrays(99, 64, materials)
+    cv2.imwrite(str(tmp_path / "photo.png"), image[..., ::-1])
+    region = (id_map == id_map.max()).astype(np.uint8) * 255
+    cv2.imwrite(str(tmp_path / "mask.png"), region)
+    cv2.imwrite(str(tmp_path / "empty.png"), np.zeros_like(region))
+
+    app = typer.Typer()
+    app.callback()(lambda: None)
+    retrieve_cmd.register(app)
+    runner = CliRunner()
+    result = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "--mask", str(tmp_path / "mask.png"),
+                                 "--top", "2", "--json"])
+    assert result.exit_code == 0, (result.output, result.exception)
+    import json
+
+    payload = json.loads(result.output)
+    assert payload["classifier"]["id"] == classifier_id
+    ranked = payload["regions"][0]["materials"]
+    assert len(ranked) == 2 and {r["name"] for r in ranked} <= set(TOY)
+    assert ranked[0]["score"] >= ranked[1]["score"]
+    table = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "-m", str(tmp_path / "mask.png")])
+    assert table.exit_code == 0 and "substance" in table.output
+    bad = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "-m", str(tmp_path / "empty.png")])
+    assert bad.exit_code == 1 and "empty" in bad.output
+    missing = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "-m", str(tmp_path / "mask.png"),
+                                  "--classifier", "999"])
+    assert missing.exit_code == 1 and "999" in missing.output
+
+
+def test_validation_held_out_by_key_when_no_rendering_is_val(db_url: str, store) -> None:
+    from photoshape_flow.pipeline.training import training_data
+
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 40, "a", val_every=10**6)  # only index 0 is "val"
+    with session_scope(db_url) as session:
+        session.execute(sa.update(Rendering).values(split="train"))
+        data = training_data(session, store, val_fraction=0.25)
+        again = training_data(session, store, val_fraction=0.25)
+    assert data.val_source == "held-out" and 0 < len(data.val) < len(data.train)
+    assert data == again  # stable: same items, same hash
+
+
+def test_no_training_renders_fails_the_row_with_a_reason(db_url: str, store) -> None:
+    _add_materials(db_url, TOY)
+    with pytest.raises(ValueError, match="training-renders"):
+        run_training("tiny")
+    with session_scope(db_url) as session:
+        (row,) = session.scalars(sa.select(Classifier)).all()
+        assert row.status == "failed" and "training regions" in row.error
