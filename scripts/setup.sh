@@ -16,7 +16,7 @@ PYTHON=${PYTHON:-python3}
 TORCH_VERSION=2.13.0
 TORCH_CPU_INDEX=${TORCH_CPU_INDEX:-https://download.pytorch.org/whl/cpu}
 REQUIRED_APT=(libllvm19)                      # Mitsuba llvm variant: Debian 12's libllvm15 aborts on first render
-OPTIONAL_APT=(postgresql chromium nodejs npm docker-compose)   # tests: PostgreSQL, gallery browser, glTF validator, compose
+OPTIONAL_APT=(postgresql chromium nodejs npm docker-compose sweethome3d-furniture)   # tests: PostgreSQL, gallery browser, glTF validator, compose, real shapes
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 

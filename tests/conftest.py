@@ -161,3 +161,25 @@ def any_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'any.db'}"
     return request.getfixturevalue("pg_url")
+
+
+# --- demo collections --------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="session")
+def tiny_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny demo collections (generated once per test session)."""
+    from photoshape_flow.demo import generate_demo
+
+    root = tmp_path_factory.mktemp("tiny-demo")
+    generate_demo(root, "tiny", seed=3)
+    return root
+
+
+def data_root_with_inbox(data_root: Path, demo: Path) -> Path:
+    """A data root whose inbox holds the demo collections (what `photoshape run ingest` reads)."""
+    inbox = data_root / "inbox"
+    inbox.mkdir(parents=True)
+    for name in ("envmaps", "materials", "shapes", "exemplars"):
+        (inbox / name).symlink_to(demo / name)
+    return data_root

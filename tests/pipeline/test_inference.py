@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sqlalchemy as sa
+from tests.pipeline.aligned import BLUE, RED, make_aligned_pairs, solid
 
 from photoshape_flow.classify.assignment import color_match, median_lab, random_of_substance, substance_vector
 from photoshape_flow.config import get_settings
@@ -12,53 +13,12 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.inference import run_all_methods, run_inference
 
-RED, BLUE, BROWN = (200, 30, 30), (30, 40, 200), (120, 80, 40)
-
-
-def _solid(color: tuple[int, int, int], size: int = 16) -> np.ndarray:
-    return np.broadcast_to(np.array(color, np.uint8), (size, size, 3)).copy()
-
 
 @pytest.fixture
 def aligned_pair(db_url: str, store) -> dict[str, int]:  # type: ignore[no-untyped-def]
     """A pair whose exemplar shows a red seat (part 1) above brown legs (part 2); part 3 is hidden."""
-    image = np.full((64, 64, 3), 255, np.uint8)
-    part_map = np.zeros((64, 64), np.uint16)
-    image[8:32, 8:56] = RED
-    part_map[8:32, 8:56] = 1
-    image[32:60, 16:48] = BROWN
-    part_map[32:60, 16:48] = 2
-    mask = (part_map > 0).astype(np.uint8) * 255
-    with session_scope(db_url) as session:
-        shape = m.Shape(source="t", source_id="s")
-        exemplar = m.Exemplar(source="t", source_id="e", image_blob=store.put_image(image),
-                              mask_blob=store.put_image(mask), size=64)
-        session.add_all([shape, exemplar])
-        session.flush()
-        parts = [m.Part(shape_id=shape.id, index=i, name=n, builtin_material={"albedo": [0.5, 0.5, 0.5]})
-                 for i, n in ((1, "seat"), (2, "legs"), (3, "cushion_back"))]
-        mats = [
-            m.Material(name="red_leather", substance="leather", preview_blob=store.put_image(_solid(RED))),
-            m.Material(name="blue_leather", substance="leather", preview_blob=store.put_image(_solid(BLUE))),
-            m.Material(name="walnut", substance="wood", preview_blob=store.put_image(_solid(BROWN))),
-            m.Material(name="grey_fabric", substance="fabric", params={"albedo": [0.5, 0.5, 0.5]}),
-        ]
-        session.add_all(parts + mats)
-        session.flush()
-        pair = m.Pair(shape_id=shape.id, exemplar_id=exemplar.id, rank=1, distance=1.0, azimuth=0.0,
-                      elevation=0.2, fov=50.0, camera_distance=2.0)
-        session.add(pair)
-        session.flush()
-        session.add(m.Alignment(pair_id=pair.id, method="flow-crf", crf_blob=store.put_image(part_map)))
-        session.add_all([
-            m.PartSubstance(pair_id=pair.id, part_id=parts[0].id, substance="leather", confidence=0.9,
-                            probs={"leather": 0.9, "fabric": 0.1}),
-            m.PartSubstance(pair_id=pair.id, part_id=parts[1].id, substance="wood", confidence=0.8,
-                            probs={"wood": 0.8, "metal": 0.2}),
-            m.PartSubstance(pair_id=pair.id, part_id=parts[2].id, observed=False),
-        ])
-        return {"pair": pair.id, "seat": parts[0].id, "legs": parts[1].id, "hidden": parts[2].id,
-                **{mat.name: mat.id for mat in mats}}
+    made = make_aligned_pairs(db_url, store, 1)
+    return {**made, "pair": made["pairs"][0]}  # type: ignore[dict-item]
 
 
 def _top1(method_key: str) -> dict[int, tuple[int | None, bool]]:
@@ -119,6 +79,6 @@ def test_pure_helpers() -> None:
     mats = [(1, "wood"), (2, "wood"), (3, "metal")]
     assert random_of_substance("wood", mats, seed=3) == random_of_substance("wood", mats, seed=3)
     assert {r.material_id for r in random_of_substance("wood", mats, seed=3)} == {1, 2}
-    red = median_lab(_solid(RED))
-    ranked = color_match(red, {1: median_lab(_solid(BLUE)), 2: red}, {1: "wood", 2: "wood"})
+    red = median_lab(solid(RED))
+    ranked = color_match(red, {1: median_lab(solid(BLUE)), 2: red}, {1: "wood", 2: "wood"})
     assert ranked[0].material_id == 2 and ranked[0].score == pytest.approx(1.0)

@@ -44,13 +44,16 @@ def demo(
     manifest = generate_demo(out_dir, size.value, seed=settings.seed if seed is None else seed)
     roots = {name: [manifest.root / name] for name in COLLECTIONS}
     source = f"demo-{size.value}"
+    provenance = {"license": "CC0-1.0", "attribution": "photoshape_flow demo generator (procedural, seed "
+                  f"{manifest.seed})"}
     if prefect:
         from photoshape_flow.flows.pipeline import photoshape_pipeline
 
-        results = [run_stage("ingest", size.value, roots=roots, source=source)]
+        results = [run_stage("ingest", size.value, roots=roots, source=source, **provenance)]
         photoshape_pipeline(profile=size.value, stages=[s for s in STAGES if s != "ingest"])
     else:
         results = run_all(size.value, ingest_roots=roots, ingest_source=source,
+                          ingest_license=provenance["license"], ingest_attribution=provenance["attribution"],
                           on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
     print_results(results)
     if evaluate:

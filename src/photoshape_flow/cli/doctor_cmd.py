@@ -69,11 +69,15 @@ def check_database() -> list[Check]:
         )
     )
     if url.startswith("sqlite"):
+        settings = get_settings()
+        parallel = settings.dask_workers > 1 or bool(settings.dask_address)
         checks.append(
             Check(
                 "workers",
-                True,
-                "SQLite: run one worker at a time; use PostgreSQL for several workers or machines",
+                not parallel,
+                "SQLite with Dask fan-out: writers will queue on the database lock"
+                if parallel else "SQLite: one worker at a time (PostgreSQL for several workers or machines)",
+                "set PHOTOSHAPE_DATABASE_URL=postgresql+psycopg://... for several workers",
                 required=False,
             )
         )

@@ -48,6 +48,8 @@ log = logging.getLogger(__name__)
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
 CODE_VERSION = "inference-1"
+# No jitter at publication: the material's own scale through the texture-scale formula.
+IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
 
 
 @dataclass
@@ -133,8 +135,12 @@ class _Context:
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
+            import torch
+
             from photoshape_flow.classify.infer import load_classifier
 
+            if settings.torch_threads:
+                torch.set_num_threads(settings.torch_threads)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
         self.material_labs: dict[int, np.ndarray] = {}
         if method == "color-match":
@@ -282,7 +288,8 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
                     rank=rank, material_id=r.material_id, score=r.score, substance=r.substance,
                     unobserved=item.mask is None,
                     params={"part_substance": item.substance.substance,
-                            "substance_confidence": item.substance.probs.get(item.substance.substance or "", None)},
+                            "substance_confidence": item.substance.probs.get(item.substance.substance or "", None),
+                            "uv": IDENTITY_UV},
                     params_hash=params_hash,
                 ))
     session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair.id,

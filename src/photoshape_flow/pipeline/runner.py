@@ -126,6 +126,8 @@ def run_ingest(
     settings: Settings,
     roots: dict[str, Sequence[Path]] | None = None,
     source: str | None = None,
+    license: str | None = None,
+    attribution: str | None = None,
 ) -> dict[str, Any]:
     """Ingest the four collections (default: the inbox folders), envmaps first so previews can render."""
     from photoshape_flow.pipeline import ingest
@@ -145,6 +147,10 @@ def run_ingest(
         kwargs: dict[str, Any] = {"settings": settings}
         if source is not None and name in ("shapes", "exemplars", "materials"):
             kwargs["source"] = source
+        if license is not None:
+            kwargs["license"] = license
+        if attribution is not None:
+            kwargs["attribution"] = attribution
         summary = functions[name](paths, **kwargs)
         out[name] = {
             "added": len(summary.added), "present": len(summary.present), "replaced": len(summary.replaced),
@@ -260,7 +266,8 @@ def run_stage(stage: str, profile: str | Profile = "default", settings: Settings
 
 def run_all(profile: str | Profile = "default", settings: Settings | None = None,
             stages: Sequence[str] = STAGES, ingest_roots: dict[str, Sequence[Path]] | None = None,
-            ingest_source: str | None = None,
+            ingest_source: str | None = None, ingest_license: str | None = None,
+            ingest_attribution: str | None = None,
             on_stage: Callable[[StageResult], None] | None = None) -> list[StageResult]:
     """Every stage in canonical order; each resumes from what earlier runs recorded."""
     results = []
@@ -269,7 +276,8 @@ def run_all(profile: str | Profile = "default", settings: Settings | None = None
             continue
         kwargs: dict[str, Any] = {}
         if stage == "ingest":
-            kwargs = {"roots": ingest_roots, "source": ingest_source}
+            kwargs = {"roots": ingest_roots, "source": ingest_source, "license": ingest_license,
+                      "attribution": ingest_attribution}
         result = run_stage(stage, profile, settings, **kwargs)
         results.append(result)
         if on_stage is not None:

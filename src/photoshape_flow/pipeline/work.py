@@ -69,8 +69,16 @@ def process(stage: str, ids: Sequence[int], profile: str | Profile = "default", 
     """Claim `ids` for `stage`, run the stage on those this worker won, mark them done."""
     settings = settings or get_settings()
     prof = get_profile(profile)
-    claim_stage = f"{stage}:{part or method or 'items'}"
-    digest = params_hash(stage, prof, part or method)
+    if stage == "inference":  # run_inference claims its pairs itself (per method and classifier)
+        from photoshape_flow.pipeline.inference import run_inference
+
+        result = run_inference(method or "classifier", pair_ids=ids, top_k=prof.top_k, settings=settings)
+        claimed = result.pairs_done + len(result.pairs_failed)
+        from photoshape_flow.pipeline.runner import _summary
+
+        return {"requested": len(ids), "claimed": claimed, "result": _summary(result)}
+    claim_stage = f"{stage}:{part or 'items'}"
+    digest = params_hash(stage, prof, part)
     with session_scope(settings.resolved_database_url) as session:
         won = claims.claim(session, claim_stage, [str(i) for i in ids], params_hash=digest,
                            lease_seconds=settings.claim_lease_seconds, retry_failed=True)
@@ -79,7 +87,7 @@ def process(stage: str, ids: Sequence[int], profile: str | Profile = "default", 
     if not mine:
         return summary
     try:
-        summary["result"] = _run(stage, mine, prof, settings, part, method)
+        summary["result"] = _run(stage, mine, prof, settings, part)
     except Exception as exc:
         with session_scope(settings.resolved_database_url) as session:
             for key in won:
@@ -90,8 +98,7 @@ def process(stage: str, ids: Sequence[int], profile: str | Profile = "default", 
     return summary
 
 
-def _run(stage: str, ids: list[int], profile: Profile, settings: Settings, part: str | None,
-         method: str | None) -> Any:
+def _run(stage: str, ids: list[int], profile: Profile, settings: Settings, part: str | None) -> Any:
     from photoshape_flow.pipeline import runner
 
     if stage == "coarse-alignment":
@@ -107,11 +114,6 @@ def _run(stage: str, ids: list[int], profile: Profile, settings: Settings, part:
         return compute_view_features(ids, config=config, settings=settings)
     if stage == "fine-alignment":
         return runner.run_fine(settings, profile, pair_ids=ids)
-    if stage == "inference":
-        from photoshape_flow.pipeline.inference import run_inference
-
-        summary = run_inference(method or "classifier", pair_ids=ids, top_k=profile.top_k, settings=settings)
-        return runner._summary(summary)
     if stage == "publish":
         from photoshape_flow.pipeline.publish import run_publish
 

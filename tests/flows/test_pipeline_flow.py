@@ -1,0 +1,96 @@
+"""The whole photoshape-pipeline flow on the tiny demo, under Prefect's test harness."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import sqlalchemy as sa
+from tests.conftest import data_root_with_inbox
+
+pytestmark = [pytest.mark.prefect, pytest.mark.slow, pytest.mark.render]
+
+
+def add_materials(tmp_path: Path, demo: Path) -> list[int]:
+    """Two new materials (recoloured copies of demo ones) ingested the normal way; returns their ids."""
+    import json
+    import shutil
+
+    import cv2
+
+    from photoshape_flow.pipeline.ingest import ingest_materials
+
+    folders = []
+    for i, source in enumerate(sorted((demo / "materials").iterdir())[:2]):
+        target = tmp_path / "new-materials" / f"new_{source.name}"
+        shutil.copytree(source, target)
+        sidecar = json.loads((target / "material.json").read_text())
+        sidecar["name"] = f"new_{sidecar['name']}"
+        (target / "material.json").write_text(json.dumps(sidecar))
+        albedo = next(target.glob("albedo.*"))
+        image = cv2.imread(str(albedo))
+        cv2.imwrite(str(albedo), image[..., [1, 2, 0]] if i == 0 else 255 - image)
+        folders.append(target)
+    summary = ingest_materials(folders)
+    assert not summary.rejected, summary.rejected
+    return sorted(summary.new_material_ids)
+
+
+def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    from photoshape_flow.flows.pipeline import new_materials, photoshape_pipeline
+    from prefect.testing.utilities import prefect_test_harness
+
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+    from photoshape_flow.db import models as m
+    from photoshape_flow.db.session import get_engine, session_scope
+    from photoshape_flow.pipeline.progress import stage_progress
+
+    data_root = data_root_with_inbox(tmp_path / "data", tiny_demo)
+    monkeypatch.setenv("PHOTOSHAPE_DATA_ROOT", str(data_root))
+    monkeypatch.delenv("PHOTOSHAPE_DATABASE_URL", raising=False)
+    get_settings.cache_clear()
+    get_engine.cache_clear()
+    migrate.upgrade()
+    with prefect_test_harness(server_startup_timeout=120):
+        result = photoshape_pipeline(profile="tiny")
+        new_ids = add_materials(tmp_path, tiny_demo)
+        rerun = new_materials(profile="tiny", renders_per_material=6)
+        from prefect.client.orchestration import get_client
+
+        async def artifact_keys():  # type: ignore[no-untyped-def]
+            async with get_client() as client:
+                return {a.key for a in await client.read_artifacts()}
+
+        import asyncio
+
+        keys = asyncio.run(artifact_keys())
+    assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
+                                       "training-renders", "training", "inference", "publish"]
+    assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-items-progress"} <= keys
+    with session_scope() as session:
+        progress = {p.stage: p for p in stage_progress(session)}
+        candidates = session.execute(sa.text("SELECT COUNT(DISTINCT pair_id) FROM photoshape_candidate "
+                                             "WHERE method = 'classifier'")).scalar_one()
+        photoshape_renders = session.execute(
+            sa.select(sa.func.count()).select_from(m.Rendering).where(m.Rendering.kind == "photoshape")
+        ).scalar_one()
+    for stage in ("coarse-alignment", "fine-alignment", "substances", "inference"):
+        assert progress[stage].done > 0 and progress[stage].pending == 0, stage
+    assert candidates > 0 and photoshape_renders > 0
+    assert (data_root / "gallery" / "index.html").is_file()
+
+    # the material-added re-run: found in the database, fine-tuned, re-inferred, old rows kept
+    assert rerun["new_materials"] == new_ids
+    with session_scope() as session:
+        new = session.get(m.Classifier, rerun["classifier_id"])
+        old = session.get(m.Classifier, rerun["previous_classifier_id"])
+        assert new.parent_id == old.id and set(new_ids) <= set(new.materials)
+        by_classifier = dict(session.execute(
+            sa.select(m.Assignment.classifier_id, sa.func.count(sa.distinct(m.Assignment.pair_id)))
+            .where(m.Assignment.method == "classifier").group_by(m.Assignment.classifier_id)
+        ).all())
+    assert by_classifier[new.id] == by_classifier[old.id] > 0
+    get_settings.cache_clear()
+    get_engine.cache_clear()

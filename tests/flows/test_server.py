@@ -1,0 +1,111 @@
+"""Against a real Prefect server: `photoshape serve` registers exactly prefect.yaml's deployments, a burst
+of material-added events makes one run, and Dask worker processes fan a stage out."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import sqlalchemy as sa
+from photoshape_flow.flows.deployments import load_declarations
+
+pytestmark = [pytest.mark.prefect, pytest.mark.slow]
+
+
+def _client_call(env: dict[str, str], fn):  # type: ignore[no-untyped-def]
+    from prefect.client.orchestration import get_client
+    from prefect.settings import PREFECT_API_URL, temporary_settings
+
+    async def main():  # type: ignore[no-untyped-def]
+        async with get_client() as client:
+            return await fn(client)
+
+    with temporary_settings({PREFECT_API_URL: env["PREFECT_API_URL"]}):
+        return asyncio.run(main())
+
+
+def test_serve_registers_the_deployments_and_debounces_material_events(
+    prefect_server: dict[str, str], tmp_path: Path
+) -> None:
+    from prefect.client.schemas.filters import DeploymentFilter, DeploymentFilterName
+
+    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(tmp_path / "data"), "DO_NOT_TRACK": "1"}
+    photoshape = str(Path(sys.executable).with_name("photoshape"))
+    serve = subprocess.Popen([photoshape, "serve"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    declared = sorted(d["name"] for d in load_declarations())
+    try:
+        deadline = time.time() + 120
+        names: list[str] = []
+        while time.time() < deadline:
+            names = sorted(d.name for d in _client_call(env, lambda c: c.read_deployments()))
+            if names == declared:
+                break
+            assert serve.poll() is None, serve.stdout.read().decode()[-2000:] if serve.stdout else ""
+            time.sleep(1)
+        assert names == declared
+
+        from prefect.events import emit_event
+        from prefect.settings import PREFECT_API_URL, temporary_settings
+
+        with temporary_settings({PREFECT_API_URL: env["PREFECT_API_URL"]}):
+            for count in (3, 5, 2):  # a bulk import emitting several events
+                emit_event(event="photoshape.material.added",
+                           resource={"prefect.resource.id": "photoshape.material-set"}, payload={"count": count})
+
+        async def new_material_runs(client):  # type: ignore[no-untyped-def]
+            deployment = (await client.read_deployments(
+                deployment_filter=DeploymentFilter(name=DeploymentFilterName(any_=["new-materials"]))))[0]
+            return await client.read_flow_runs(
+                deployment_filter=DeploymentFilter(id={"any_": [deployment.id]}))
+
+        runs = []
+        deadline = time.time() + 60
+        while time.time() < deadline and not runs:
+            runs = _client_call(env, new_material_runs)
+            time.sleep(1)
+        time.sleep(5)  # give the later events time to (not) fire again
+        runs = _client_call(env, new_material_runs)
+        assert len(runs) == 1
+        assert runs[0].state_name == "Scheduled"  # debounced: it starts after the schedule_after window
+    finally:
+        serve.terminate()
+        serve.wait(timeout=30)
+
+
+def test_dask_worker_processes_fan_out_a_stage(prefect_server: dict[str, str], tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    from photoshape_flow.flows.stages import inference
+    from prefect.settings import PREFECT_API_URL, temporary_settings
+    from prefect_dask import DaskTaskRunner
+    from tests.pipeline.aligned import make_aligned_pairs
+
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+    from photoshape_flow.db import models as m
+    from photoshape_flow.db.session import get_engine, session_scope
+    from photoshape_flow.store import BlobStore
+
+    monkeypatch.setenv("PHOTOSHAPE_DATA_ROOT", str(tmp_path / "data"))
+    for key, value in prefect_server.items():
+        monkeypatch.setenv(key, value)  # Dask workers inherit the API URL: no ephemeral servers
+    get_settings.cache_clear()
+    get_engine.cache_clear()
+    settings = get_settings()
+    migrate.upgrade(settings.resolved_database_url)
+    made = make_aligned_pairs(settings.resolved_database_url, BlobStore(settings.blob_root), n_pairs=6)
+    runner = DaskTaskRunner(cluster_kwargs={"n_workers": 2, "threads_per_worker": 1, "processes": True})
+    with temporary_settings({PREFECT_API_URL: prefect_server["PREFECT_API_URL"]}):
+        result = inference.with_options(task_runner=runner)(profile="tiny", methods=["color-match"], batch_size=2)
+    assert result["color-match"] == {"batches": 3, "items": 6, "claimed": 6}
+    with session_scope() as session:
+        workers = session.execute(sa.select(m.WorkClaim.worker).where(m.WorkClaim.state == "done")).scalars().all()
+        pairs = session.execute(sa.select(sa.func.count(sa.distinct(m.Assignment.pair_id)))).scalar_one()
+    assert pairs == len(made["pairs"])
+    assert len({w.split(":")[-1] for w in workers}) >= 2  # batches ran in more than one worker process
+    get_settings.cache_clear()
+    get_engine.cache_clear()
