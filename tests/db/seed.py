@@ -5,6 +5,7 @@ from __future__ import annotations
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
+from photoshape_flow.db.base import utcnow
 
 
 def seed(session: Session, suffix: str = "") -> dict[str, int]:
@@ -28,6 +29,10 @@ def seed(session: Session, suffix: str = "") -> dict[str, int]:
     session.add(pair)
     session.add(m.ViewFeature(shape_id=shape.id, viewpoint_set_id=vset.id, descriptor="hog", dims=1352))
     session.add(m.ExemplarFeature(exemplar_id=exemplar.id, descriptor="hog", dims=1352))
+    session.add(m.ExemplarMatch(
+        exemplar_id=exemplar.id, viewpoint_set_id=vset.id, descriptor="hog", rank=1, shape_id=shape.id,
+        view_index=0, distance=3.5, searched_at=utcnow(),
+    ))
     session.flush()
     classifier = m.Classifier(name=f"r34{suffix}", kind="material", architecture="resnet34", materials=[0, oak.id])
     session.add(classifier)

@@ -47,3 +47,26 @@ def test_models_and_migrations_agree(any_db_url: str) -> None:
         diff = compare_metadata(context, Base.metadata)
     engine.dispose()
     assert diff == []
+
+
+def test_exemplar_match_revision_drops_the_old_reverse_index_rows(any_db_url: str) -> None:
+    """The `topk:` exemplar_feature rows (blobs the migration cannot read) go; real descriptors stay."""
+    migrate.upgrade(any_db_url, "80193f30daa2")
+    engine = make_engine(any_db_url)
+    with engine.begin() as conn:
+        eid = conn.execute(
+            sa.text("INSERT INTO exemplar (source, source_id, meta, status, exclude, params_hash) "
+                    "VALUES ('test', 'photo', '{}', 'ok', FALSE, '') RETURNING id")
+        ).scalar_one()
+        for descriptor in ("hog-insensitive9", "dedupe-hog", "topk:hog-insensitive9:1", "topk:hog-all31:2:chair"):
+            conn.execute(
+                sa.text("INSERT INTO exemplar_feature (exemplar_id, descriptor, status, params_hash) "
+                        "VALUES (:e, :d, 'ok', '')"),
+                {"e": eid, "d": descriptor},
+            )
+    migrate.upgrade(any_db_url)
+    with engine.connect() as conn:
+        left = conn.execute(sa.text("SELECT descriptor FROM exemplar_feature ORDER BY descriptor")).scalars().all()
+        matches = conn.execute(sa.text("SELECT COUNT(*) FROM exemplar_match")).scalar_one()
+    engine.dispose()
+    assert left == ["dedupe-hog", "hog-insensitive9"] and matches == 0

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,8 +24,8 @@ from photoshape_flow.pipeline.coarse_alignment import (
     ensure_viewpoint_set,
     evaluate_coarse_alignment,
     load_reverse_index,
+    match_scope,
     run_coarse_alignment,
-    state_descriptor,
 )
 from photoshape_flow.render.testing import box_part, normalise_to_unit_cube
 
@@ -111,7 +112,7 @@ def counts(url: str) -> dict[str, int]:
     with session_scope(url) as session:
         return {
             t.__tablename__: session.execute(sa.select(sa.func.count()).select_from(t)).scalar_one()
-            for t in (m.ViewpointSet, m.ViewFeature, m.ExemplarFeature, m.Pair)
+            for t in (m.ViewpointSet, m.ViewFeature, m.ExemplarFeature, m.ExemplarMatch, m.Pair)
         }
 
 
@@ -157,7 +158,25 @@ def test_ensure_viewpoint_set_is_named_versioned_and_immutable(db_url: str) -> N
             ensure_viewpoint_set(session, "nope")
 
 
-def test_pipeline_is_idempotent_incremental_and_exact(db_url: str, store) -> None:  # type: ignore[no-untyped-def]
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def stage_db(request: pytest.FixtureRequest, settings_env, monkeypatch: pytest.MonkeyPatch):  # type: ignore[no-untyped-def]
+    """The stage's database, migrated: the test data root's SQLite file, or a fresh PostgreSQL one."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+    from photoshape_flow.db.session import get_engine
+
+    if request.param == "postgresql":
+        monkeypatch.setenv("PHOTOSHAPE_DATABASE_URL", request.getfixturevalue("pg_url"))
+        get_settings.cache_clear()
+        get_engine.cache_clear()
+    url = get_settings().resolved_database_url
+    migrate.upgrade(url)
+    yield url
+    get_engine(url).dispose()
+
+
+def test_pipeline_is_idempotent_incremental_and_exact(stage_db: str, store) -> None:  # type: ignore[no-untyped-def]
+    db_url = stage_db
     renderer = NumpyRenderer()
     sid = {k: add_shape(db_url, store, k, mesh) for k, mesh in SHAPES.items()}
     broken = add_shape(db_url, store, "broken", None)
@@ -182,8 +201,15 @@ def test_pipeline_is_idempotent_incremental_and_exact(db_url: str, store) -> Non
         vf = session.execute(sa.select(m.ViewFeature).where(m.ViewFeature.shape_id == sid["s0"])).scalar_one()
         shard = store.load_array(vf.feature_blob)
         assert shard.dtype == np.float16 and shard.shape == (len(viewpoints(VP)), 13 * 13 * 31)
+        # the reverse index is plain rows: rank 1 of e0 is s0 at view 4, k rows per exemplar
+        best = session.execute(
+            sa.select(m.ExemplarMatch).where(m.ExemplarMatch.exemplar_id == e0, m.ExemplarMatch.rank == 1)
+        ).scalar_one()
+        assert (best.shape_id, best.view_index, best.descriptor) == (sid["s0"], 4, "hog-all31")
+        assert best.scope == match_scope(CONFIG) == "" and best.searched_at is not None and best.params_hash
     before = counts(db_url)
-    assert before["view_feature"] == 4 and before["exemplar_feature"] == 4  # 2 descriptors + 2 index lists
+    assert before["view_feature"] == 4 and before["exemplar_feature"] == 2  # one descriptor per exemplar
+    assert before["exemplar_match"] == 2 * CONFIG.exemplar_topk
 
     again = run_coarse_alignment(config=CONFIG, renderer=renderer)
     assert counts(db_url) == before
@@ -191,10 +217,22 @@ def test_pipeline_is_idempotent_incremental_and_exact(db_url: str, store) -> Non
     assert again["pairs"]["full"] == again["pairs"]["incremental"] == again["pairs"]["pairs_written"] == 0
 
     # a new shape: only its sweep is described, old exemplars are searched against it alone
+    def rows() -> dict[int, list[tuple[int, int, Any]]]:
+        with session_scope(db_url) as session:
+            out: dict[int, list[tuple[int, int, Any]]] = {}
+            for r in session.execute(sa.select(m.ExemplarMatch).order_by(m.ExemplarMatch.rank)).scalars():
+                out.setdefault(r.exemplar_id, []).append((r.created_at, r.shape_id, r.searched_at))
+            return out
+
+    old_rows = rows()
     sid["s3"] = add_shape(db_url, store, "s3", chair(0.4, True, 0.3))
     third = run_coarse_alignment(config=CONFIG, renderer=renderer)
     assert third["view_features"]["computed"] == 1
     assert third["pairs"]["full"] == 0 and third["pairs"]["incremental"] == 2
+    for eid, now in rows().items():  # every list was searched; only changed ones were rewritten
+        same = [r[1] for r in now] == [r[1] for r in old_rows[eid]]
+        assert ({r[0] for r in now} == {r[0] for r in old_rows[eid]}) == same
+        assert all(n[2] > o[2] for n, o in zip(now, old_rows[eid], strict=False))
     # a new exemplar: searched against every shape, nobody else
     e2 = add_exemplar(db_url, store, "e2", SHAPES["s2"], view=30)
     fourth = run_coarse_alignment(config=CONFIG, renderer=renderer)
@@ -214,10 +252,8 @@ def test_pipeline_is_idempotent_incremental_and_exact(db_url: str, store) -> Non
         assert pairs and all(p.exclude and p.exclude_reason == DROPPED_REASON for p in pairs)
         index = load_reverse_index(session, CONFIG)
         assert sid["s0"] not in index[e0][:, 0]
-        states = session.execute(
-            sa.select(sa.func.count()).where(m.ExemplarFeature.descriptor.like(state_descriptor(CONFIG, 0)[:-1] + "%"))
-        ).scalar_one()
-        assert states == 3
+        listed = session.execute(sa.select(sa.func.count(sa.distinct(m.ExemplarMatch.exemplar_id)))).scalar_one()
+        assert listed == 3
     assert {e: [int(s) for s in a[:, 0]] for e, a in index.items()} == reference_lists(db_url, store, CONFIG)
     # and bringing it back restores its pairs without adding rows
     n = counts(db_url)
@@ -230,6 +266,28 @@ def test_pipeline_is_idempotent_incremental_and_exact(db_url: str, store) -> Non
             sa.select(m.Pair).where(m.Pair.shape_id == sid["s0"], m.Pair.exemplar_id == e0)
         ).scalar_one()
         assert not p.exclude and p.rank == 1
+
+
+def test_list_that_lost_rows_to_a_deleted_shape_is_searched_again(stage_db: str, store) -> None:  # type: ignore[no-untyped-def]
+    db_url = stage_db
+    renderer = NumpyRenderer()
+    sid = {k: add_shape(db_url, store, k, mesh) for k, mesh in SHAPES.items()}
+    e0 = add_exemplar(db_url, store, "e0", SHAPES["s0"], view=4)
+    run_coarse_alignment(config=CONFIG, renderer=renderer)
+    with session_scope(db_url) as session:
+        second = int(load_reverse_index(session, CONFIG)[e0][1, 0])
+        session.execute(sa.delete(m.Shape).where(m.Shape.id == second))  # cascades its index rows
+        assert len(load_reverse_index(session, CONFIG)[e0]) == 1
+    again = run_coarse_alignment(config=CONFIG, renderer=renderer)
+    assert again["pairs"]["full"] == 1 and again["pairs"]["incremental"] == 0
+    with session_scope(db_url) as session:
+        index = load_reverse_index(session, CONFIG)
+        ranks = session.execute(
+            sa.select(m.ExemplarMatch.rank).where(m.ExemplarMatch.exemplar_id == e0).order_by(m.ExemplarMatch.rank)
+        ).scalars().all()
+    assert ranks == [1, 2] and second not in index[e0][:, 0]
+    assert {e: [int(s) for s in a[:, 0]] for e, a in index.items()} == reference_lists(db_url, store, CONFIG)
+    assert set(sid.values()) - {second} == {int(s) for s in index[e0][:, 0]}
 
 
 def test_evaluate_against_ground_truth(db_url: str, store) -> None:  # type: ignore[no-untyped-def]

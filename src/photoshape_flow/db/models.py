@@ -180,6 +180,38 @@ class ExemplarFeature(TimestampMixin, StatusMixin, ParamsHashMixin, Base):
     dims: Mapped[int | None]
 
 
+class ExemplarMatch(TimestampMixin, ParamsHashMixin, Base):
+    """One entry of the coarse-alignment reverse index (section 4.1): a shape, its best view, ranked.
+
+    Per exemplar, viewpoint set, descriptor and scope (category restriction, '' for none) the stage
+    keeps the top-k shapes by exact search; `searched_at` is when that list was last searched, so a
+    later run searches the exemplar only against shapes whose features appeared or changed since.
+    """
+
+    __tablename__ = "exemplar_match"
+    # named by hand: the convention's name (69 characters) is past PostgreSQL's 63, where it would
+    # be shortened differently than on SQLite
+    __table_args__ = (
+        sa.UniqueConstraint(
+            "exemplar_id", "viewpoint_set_id", "descriptor", "scope", "rank",
+            name="uq_exemplar_match__exemplar_id_vpset_descriptor_scope_rank",
+        ),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    exemplar_id: Mapped[int] = mapped_column(_fk("exemplar.id"))
+    viewpoint_set_id: Mapped[int] = mapped_column(_fk("viewpoint_set.id"))
+    descriptor: Mapped[str] = mapped_column(sa.String(64), comment="descriptor name, e.g. hog-insensitive9")
+    scope: Mapped[str] = mapped_column(
+        sa.String(64), default="", server_default="", comment="category the search was restricted to, or ''"
+    )
+    rank: Mapped[int] = mapped_column(comment="rank of the shape among the exemplar's matches (1 = best)")
+    shape_id: Mapped[int] = mapped_column(_fk("shape.id"), index=True)
+    view_index: Mapped[int] = mapped_column(comment="index of the shape's best view in the viewpoint set")
+    distance: Mapped[float] = mapped_column(comment="squared L2 distance of the descriptors")
+    searched_at: Mapped[dt.datetime] = mapped_column(comment="when this exemplar's list was last searched")
+
+
 class Pair(TimestampMixin, ExcludeMixin, ParamsHashMixin, Base):
     """A shape-exemplar candidate from coarse alignment, with the retrieved camera."""
 
@@ -355,6 +387,6 @@ class WorkClaim(TimestampMixin, ParamsHashMixin, Base):
 
 
 ALL_TABLES: tuple[type[Base], ...] = (
-    Shape, Part, Exemplar, Material, Envmap, ViewpointSet, ViewFeature, ExemplarFeature, Pair,
-    Alignment, PartSubstance, Rendering, Classifier, Assignment, Evaluation, Grade, WorkClaim,
+    Shape, Part, Exemplar, Material, Envmap, ViewpointSet, ViewFeature, ExemplarFeature, ExemplarMatch,
+    Pair, Alignment, PartSubstance, Rendering, Classifier, Assignment, Evaluation, Grade, WorkClaim,
 )

@@ -8,12 +8,16 @@ Three steps, each idempotent and incremental:
 3. `compute_pairs`: the reverse index (per exemplar: the top-k shapes, best view each) by exact
    search, inverted into per-shape lists of the top-N exemplars, written as `Pair` rows.
 
-The reverse index is persisted per exemplar as an `ExemplarFeature` row whose descriptor is
-``topk:<descriptor>:<viewpoint set id>[:<category>]`` and whose blob is a float64 (n, 3) array of [shape id,
-view index, squared distance]; its ``updated_at`` is the time the exemplar was last searched. A
-later run therefore searches new exemplars against every shape but old exemplars only against the
-shapes whose features appeared or changed since, merges, and rewrites the pairs of the shapes whose
-exemplar lists changed. Pairs that fall out of a shape's list are excluded (reason
+The reverse index is persisted as `ExemplarMatch` rows, one per (exemplar, viewpoint set,
+descriptor, scope, rank) where scope is the category restriction or ''. Each row holds the shape,
+its best view and the squared distance, plus ``searched_at``, when that exemplar's list was last
+searched, and ``params_hash`` over k, mode, viewpoints, descriptor settings, the exemplar's feature
+and the category. A later run therefore searches new exemplars (or those whose hash changed)
+against every shape but old exemplars only against the shapes whose features appeared or changed
+since their ``searched_at``, merges, and rewrites the pairs of the shapes whose exemplar lists
+changed. A list whose listed shape vanished or changed, or that lost rows to a deleted shape's
+cascade, is searched again in full. An exemplar's rows are replaced in one transaction (unchanged
+lists only get a new ``searched_at``). Pairs that fall out of a shape's list are excluded (reason
 `DROPPED_REASON`), never deleted, because fine alignment, grades and renders hang off them.
 """
 
@@ -60,7 +64,6 @@ log = logging.getLogger(__name__)
 
 STAGE = "coarse-alignment"
 DROPPED_REASON = "coarse-alignment: no longer among the shape's top exemplars"
-STATE_PREFIX = "topk:"
 
 
 @dataclass(frozen=True)
@@ -310,10 +313,18 @@ def compute_exemplar_features(
 
 
 # -- step 3: reverse index and pairs --------------------------------------------------------------
-def state_descriptor(config: CoarseConfig, viewpoint_set_id: int) -> str:
-    """The `ExemplarFeature.descriptor` under which an exemplar's top-k shape list is kept."""
-    key = f"{STATE_PREFIX}{config.hog.name}:{viewpoint_set_id}"
-    return f"{key}:{config.category}" if config.category else key
+def match_scope(config: CoarseConfig) -> str:
+    """`ExemplarMatch.scope` of a run: the category its search is restricted to, or ''."""
+    return config.category or ""
+
+
+def _match_filter(config: CoarseConfig, viewpoint_set_id: int) -> tuple[sa.ColumnElement[bool], ...]:
+    """The `ExemplarMatch` rows of one reverse index: (viewpoint set, descriptor, scope)."""
+    return (
+        m.ExemplarMatch.viewpoint_set_id == viewpoint_set_id,
+        m.ExemplarMatch.descriptor == config.hog.name,
+        m.ExemplarMatch.scope == match_scope(config),
+    )
 
 
 def _state_hash(config: CoarseConfig, vpset: m.ViewpointSet, feature_blob: str) -> str:
@@ -343,6 +354,42 @@ def _pair_hash(config: CoarseConfig, vpset: m.ViewpointSet) -> str:
     )
 
 
+@dataclass(frozen=True)
+class _StoredList:
+    """One exemplar's stored top-k list: (n, 3) [shape id, view index, squared distance], nearest first."""
+
+    matches: np.ndarray
+    params_hash: str | None  # None: the rows disagree
+    searched_at: float  # seconds since the epoch
+    complete: bool  # ranks are 1..n (no row lost to a deleted shape's cascade) and hashes agree
+
+
+def _stored_lists(session: Session, config: CoarseConfig, viewpoint_set_id: int) -> dict[int, _StoredList]:
+    rows = session.execute(
+        sa.select(
+            m.ExemplarMatch.exemplar_id, m.ExemplarMatch.rank, m.ExemplarMatch.shape_id,
+            m.ExemplarMatch.view_index, m.ExemplarMatch.distance, m.ExemplarMatch.params_hash,
+            m.ExemplarMatch.searched_at,
+        )
+        .where(*_match_filter(config, viewpoint_set_id))
+        .order_by(m.ExemplarMatch.exemplar_id, m.ExemplarMatch.rank)
+    ).all()
+    grouped: dict[int, list[Any]] = defaultdict(list)
+    for row in rows:
+        grouped[row.exemplar_id].append(row)
+    out: dict[int, _StoredList] = {}
+    for eid, entries in grouped.items():
+        hashes = {r.params_hash for r in entries}
+        params_hash = next(iter(hashes)) if len(hashes) == 1 else None
+        out[eid] = _StoredList(
+            matches=np.array([[r.shape_id, r.view_index, r.distance] for r in entries], np.float64).reshape(-1, 3),
+            params_hash=params_hash,
+            searched_at=min(_ts(r.searched_at) for r in entries),
+            complete=params_hash is not None and [r.rank for r in entries] == list(range(1, len(entries) + 1)),
+        )
+    return out
+
+
 def _state_array(matches: Matches, row: int) -> np.ndarray:
     keep = matches.shapes[row] >= 0
     return np.stack(
@@ -366,6 +413,59 @@ def _entries(arr: np.ndarray | None) -> set[tuple[int, int, float]]:
     return {(int(s), int(v), float(d)) for s, v, d in arr}
 
 
+def _chunks(items: Sequence[int], size: int = 500) -> list[Sequence[int]]:
+    return [items[i : i + size] for i in range(0, len(items), size)]
+
+
+def _write_lists(
+    session: Session,
+    config: CoarseConfig,
+    vp_id: int,
+    new_lists: Mapping[int, np.ndarray],
+    hashes: Mapping[int, str],
+    stored: Mapping[int, _StoredList],
+    stale: Sequence[int],
+    searched_at: dt.datetime,
+) -> None:
+    """Replace the changed lists' rows, re-stamp the unchanged ones and drop the stale exemplars' rows.
+
+    Called inside one transaction, so an exemplar's list is never seen half written.
+    """
+    scope = match_scope(config)
+    unchanged = [
+        eid for eid, arr in new_lists.items()
+        if eid in stored and stored[eid].complete and np.array_equal(stored[eid].matches, arr)
+    ]
+    replaced = sorted(set(new_lists) - set(unchanged))
+    for ids in _chunks(sorted({*replaced, *stale})):
+        session.execute(
+            sa.delete(m.ExemplarMatch).where(*_match_filter(config, vp_id), m.ExemplarMatch.exemplar_id.in_(ids))
+        )
+    now = utcnow()
+    rows = [
+        {
+            "exemplar_id": eid, "viewpoint_set_id": vp_id, "descriptor": config.hog.name, "scope": scope,
+            "rank": rank, "shape_id": int(s), "view_index": int(v), "distance": float(d),
+            "searched_at": searched_at, "params_hash": hashes[eid], "created_at": now, "updated_at": now,
+        }
+        for eid in replaced
+        for rank, (s, v, d) in enumerate(new_lists[eid], start=1)
+    ]
+    if rows:
+        session.execute(sa.insert(m.ExemplarMatch.__table__), rows)
+    if unchanged:
+        table = m.ExemplarMatch.__table__
+        session.execute(
+            sa.update(table)
+            .where(
+                table.c.viewpoint_set_id == vp_id, table.c.descriptor == config.hog.name, table.c.scope == scope,
+                table.c.exemplar_id == sa.bindparam("eid"),
+            )
+            .values(searched_at=searched_at, params_hash=sa.bindparam("hash"), updated_at=now),
+            [{"eid": eid, "hash": hashes[eid]} for eid in unchanged],
+        )
+
+
 def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | None = None) -> dict[str, Any]:
     """Update the reverse index with what is new and rewrite the pairs of the affected shapes.
 
@@ -381,7 +481,6 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
     with session_scope(url) as session:
         vpset = _viewpoint_set(session, config)
         vp_id, num_views, cameras = vpset.id, vpset.num_views, np.asarray(vpset.cameras, np.float64)
-        state_key = state_descriptor(config, vp_id)
         pair_hash = _pair_hash(config, vpset)
 
         shape_q = (
@@ -426,15 +525,7 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
             for eid, blob, h, img, msk in session.execute(ex_q.order_by(m.ExemplarFeature.exemplar_id))
             if h == exemplar_feature_hash(config, img, msk)
         }
-        states = {
-            eid: (blob, h, _ts(updated))
-            for eid, blob, h, updated in session.execute(
-                sa.select(
-                    m.ExemplarFeature.exemplar_id, m.ExemplarFeature.feature_blob,
-                    m.ExemplarFeature.params_hash, m.ExemplarFeature.updated_at,
-                ).where(m.ExemplarFeature.descriptor == state_key)
-            )
-        }
+        stored = _stored_lists(session, config, vp_id)
         pair_q = (
             sa.select(m.Pair.shape_id, m.Pair.exemplar_id, m.Pair.params_hash)
             .join(m.Shape, m.Shape.id == m.Pair.shape_id)
@@ -445,24 +536,30 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
         active_pairs = session.execute(pair_q).all()
 
     summary: dict[str, Any] = {"shapes": len(shapes), "exemplars": len(exemplars), "full": 0, "incremental": 0}
+    k = config.exemplar_topk
+    hashes = {eid: _state_hash(config, vpset, blob) for eid, blob in exemplars.items()}
     old_lists: dict[int, np.ndarray] = {}
     full: list[int] = []
     by_watermark: dict[float, list[int]] = defaultdict(list)
     newest_shape = max((seen for _, _, seen in shapes.values()), default=float("-inf"))
-    for eid, feature_blob in exemplars.items():
-        state = states.get(eid)
-        if state is None or state[0] is None or state[1] != _state_hash(config, vpset, feature_blob):
-            full.append(eid)
+    for eid in exemplars:
+        state = stored.get(eid)
+        if state is None or not state.complete or state.params_hash != hashes[eid]:
+            if state is not None or shapes:  # with no shapes there is nothing to search yet
+                full.append(eid)
             continue
-        arr = store.load_array(state[0]).reshape(-1, 3)
+        arr = state.matches
         old_lists[eid] = arr
-        listed = arr[:, 0].astype(np.int64)
+        listed = {int(s) for s in arr[:, 0]}
         # a listed shape that vanished or whose shard changed invalidates the list: another shape
-        # beyond the old k-th may now belong in it
-        if any(int(s) not in shapes or shapes[int(s)][1] > state[2] for s in listed):
+        # beyond the old k-th may now belong in it; so does a short list that misses a shape it
+        # should have seen (its row went with a deleted shape)
+        if any(s not in shapes or shapes[s][1] > state.searched_at for s in listed) or (
+            len(arr) < k and any(s not in listed and seen <= state.searched_at for s, (_, _, seen) in shapes.items())
+        ):
             full.append(eid)
-        elif newest_shape > state[2]:
-            by_watermark[state[2]].append(eid)
+        elif newest_shape > state.searched_at:
+            by_watermark[state.searched_at].append(eid)
 
     shape_order = sorted(shapes)
     new_lists: dict[int, np.ndarray] = {}
@@ -476,7 +573,6 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
 
     search_kw = {"mode": config.mode, "chunk_rows": config.chunk_rows, "query_batch": config.query_batch,
                  "device": _device(settings)}
-    k = config.exemplar_topk
     if full and shape_order:
         found = search(queries(full), db_for(shape_order), k, **search_kw)
         found.shapes = np.where(found.shapes >= 0, np.asarray(shape_order)[np.maximum(found.shapes, 0)], -1)
@@ -498,43 +594,23 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
     # shapes whose incoming exemplar entries changed
     affected: set[int] = set()
     for eid, arr in new_lists.items():
-        changed = _entries(old_lists.get(eid)) ^ _entries(arr)
-        affected.update(s for s, _, _ in changed)
-    stale_states = [eid for eid in states if eid not in exemplars]
-    for eid in stale_states:
-        blob = states[eid][0]
-        if blob is not None:
-            affected.update(int(s) for s in store.load_array(blob).reshape(-1, 3)[:, 0])
+        previous = stored[eid].matches if eid in stored else None
+        affected.update(s for s, _, _ in _entries(previous) ^ _entries(arr))
+    stale = sorted(eid for eid in stored if eid not in exemplars)
+    for eid in stale:
+        affected.update(int(s) for s in stored[eid].matches[:, 0])
     for sid, eid, h in active_pairs:
         if sid not in shapes or eid not in exemplars or h != pair_hash:
             affected.add(int(sid))
 
     with session_scope(url) as session:
-        for eid, arr in new_lists.items():
-            upsert(
-                session, m.ExemplarFeature,
-                {
-                    "exemplar_id": eid, "descriptor": state_key, "feature_blob": store.put_array(arr),
-                    "dims": int(len(arr)), "status": "ok", "error": None,
-                    "params_hash": _state_hash(config, vpset, exemplars[eid]), "updated_at": scan_time,
-                },
-                key=["exemplar_id", "descriptor"],
-            )
-        if stale_states:
-            session.execute(
-                sa.delete(m.ExemplarFeature).where(
-                    m.ExemplarFeature.descriptor == state_key, m.ExemplarFeature.exemplar_id.in_(stale_states)
-                )
-            )
+        _write_lists(session, config, vp_id, new_lists, hashes, stored, stale, scan_time)
 
     written = dropped = 0
     if affected:
-        all_lists = {eid: new_lists.get(eid, old_lists.get(eid)) for eid in exemplars}
-        missing = [eid for eid, arr in all_lists.items() if arr is None]
-        for eid in missing:  # unchanged lists not loaded above
-            all_lists[eid] = store.load_array(states[eid][0]).reshape(-1, 3)
-        eids = sorted(all_lists)
-        lists = _as_matches([all_lists[e] for e in eids], k)
+        empty = np.zeros((0, 3))
+        eids = sorted(exemplars)
+        lists = _as_matches([new_lists.get(e, old_lists.get(e, empty)) for e in eids], k)
         per_shape = invert(eids, lists, config.shape_topn, config.distance_cutoff)
         written, dropped = _write_pairs(url, sorted(affected), per_shape, cameras, vp_id, config, pair_hash)
     summary.update(
@@ -628,14 +704,8 @@ def run_coarse_alignment(
 def load_reverse_index(session: Session, config: CoarseConfig | None = None) -> dict[int, np.ndarray]:
     """Per exemplar id: its (n, 3) [shape id, view index, distance] list, nearest first."""
     config = config or CoarseConfig()
-    store = BlobStore(get_settings().blob_root)
     vpset = _viewpoint_set(session, config)
-    rows = session.execute(
-        sa.select(m.ExemplarFeature.exemplar_id, m.ExemplarFeature.feature_blob).where(
-            m.ExemplarFeature.descriptor == state_descriptor(config, vpset.id), m.ExemplarFeature.status == "ok"
-        )
-    )
-    return {eid: store.load_array(blob).reshape(-1, 3) for eid, blob in rows if blob is not None}
+    return {eid: stored.matches for eid, stored in _stored_lists(session, config, vpset.id).items()}
 
 
 def _gt_entries(groundtruth: Any) -> dict[str, dict[str, Any]]:

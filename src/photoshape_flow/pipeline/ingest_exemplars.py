@@ -71,6 +71,7 @@ def delete_exemplar_dependents(session: Session, exemplar_id: int) -> None:
     """Remove rows derived from an exemplar's pixels; free exemplars marked duplicates of it."""
     session.execute(sa.delete(m.Pair).where(m.Pair.exemplar_id == exemplar_id))
     session.execute(sa.delete(m.ExemplarFeature).where(m.ExemplarFeature.exemplar_id == exemplar_id))
+    session.execute(sa.delete(m.ExemplarMatch).where(m.ExemplarMatch.exemplar_id == exemplar_id))
     session.execute(
         sa.update(m.Exemplar)
         .where(m.Exemplar.duplicate_of_id == exemplar_id)

@@ -10,6 +10,9 @@ from sqlalchemy.orm import Session
 from photoshape_flow.db import models as m
 from photoshape_flow.vocab import STAGES
 
+# the `descriptor` of every feature row coarse alignment writes (`HogParams.name`: hog-<channels>)
+COARSE_DESCRIPTOR_PREFIX = "hog-"
+
 
 @dataclass(frozen=True)
 class StageProgress:
@@ -43,12 +46,19 @@ def stage_progress(session: Session) -> list[StageProgress]:
         failed_items += _count(session, sa.select(model.id).where(model.status != "ok"))
     out["ingest"] = StageProgress("ingest", "items", ok_items, 0, failed_items)
 
+    # only the descriptors coarse alignment writes: ingest records `dedupe-hog` for every exemplar
+    view_features = sa.select(m.ViewFeature.shape_id).where(
+        m.ViewFeature.descriptor.startswith(COARSE_DESCRIPTOR_PREFIX)
+    )
+    ex_features = sa.select(m.ExemplarFeature.exemplar_id).where(
+        m.ExemplarFeature.descriptor.startswith(COARSE_DESCRIPTOR_PREFIX)
+    )
     shapes_ok = sa.select(m.Shape.id).where(m.Shape.status == "ok", ~m.Shape.exclude)
-    shapes_done = sa.select(m.ViewFeature.shape_id).where(m.ViewFeature.status == "ok")
-    shapes_failed = sa.select(m.ViewFeature.shape_id).where(m.ViewFeature.status != "ok")
+    shapes_done = view_features.where(m.ViewFeature.status == "ok")
+    shapes_failed = view_features.where(m.ViewFeature.status != "ok")
     exemplars_ok = sa.select(m.Exemplar.id).where(m.Exemplar.status == "ok", ~m.Exemplar.exclude)
-    ex_done = sa.select(m.ExemplarFeature.exemplar_id).where(m.ExemplarFeature.status == "ok")
-    ex_failed = sa.select(m.ExemplarFeature.exemplar_id).where(m.ExemplarFeature.status != "ok")
+    ex_done = ex_features.where(m.ExemplarFeature.status == "ok")
+    ex_failed = ex_features.where(m.ExemplarFeature.status != "ok")
     done = _count(session, shapes_ok.where(m.Shape.id.in_(shapes_done))) + _count(
         session, exemplars_ok.where(m.Exemplar.id.in_(ex_done))
     )
