@@ -24,8 +24,8 @@ def test_square_box_and_crop_fill_outside_the_image() -> None:
     mask[5:15, 50:60] = True  # touches the right border
     mask[10:12, 30:32] = True
     box = square_box(mask)
-    assert box == (-5, 30, 30)  # 10 rows x 30 cols -> a 30-pixel square, centred: leaves the image
-    crop = crop_square(np.arange(40 * 60).reshape(40, 60), (-5, 50, 20), fill=-1)
+    assert box == (30, -5, 30)  # 10 rows x 30 cols -> a 30-pixel square, centred: leaves the image
+    crop = crop_square(np.arange(40 * 60).reshape(40, 60), 50, -5, 20, fill=-1)
     assert crop.shape == (20, 20)
     assert (crop[:5] == -1).all() and (crop[:, 10:] == -1).all() and crop[5, 0] == 50
     assert square_box(np.zeros((5, 5), bool)) is None

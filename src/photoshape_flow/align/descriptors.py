@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from photoshape_flow.align.hog import channel_indices, hog_descriptor, hog_grid
+from photoshape_flow.imaging.squares import crop_square, square_box
 
 DESCRIPTOR_CODE_VERSION = 1  # bump when the computation changes in a way the params do not show
 
@@ -122,29 +123,6 @@ def mask_from(mask: np.ndarray) -> np.ndarray:
     return m > 0
 
 
-def square_box(mask: np.ndarray) -> tuple[int, int, int] | None:
-    """(y0, x0, side) of the square centred on the foreground's bounding box; None when empty."""
-    ys = np.flatnonzero(mask.any(axis=1))
-    xs = np.flatnonzero(mask.any(axis=0))
-    if len(ys) == 0:
-        return None
-    y0, y1, x0, x1 = int(ys[0]), int(ys[-1]) + 1, int(xs[0]), int(xs[-1]) + 1
-    side = max(y1 - y0, x1 - x0)
-    return y0 - (side - (y1 - y0)) // 2, x0 - (side - (x1 - x0)) // 2, side
-
-
-def crop_square(image: np.ndarray, box: tuple[int, int, int], fill: float | int) -> np.ndarray:
-    """Crop (y0, x0, side) out of a 2-D array, filling with `fill` where the square leaves it."""
-    y0, x0, side = box
-    out = np.full((side, side), fill, dtype=image.dtype)
-    h, w = image.shape[:2]
-    sy0, sx0 = max(y0, 0), max(x0, 0)
-    sy1, sx1 = min(y0 + side, h), min(x0 + side, w)
-    if sy1 > sy0 and sx1 > sx0:
-        out[sy0 - y0 : sy1 - y0, sx0 - x0 : sx1 - x0] = image[sy0:sy1, sx0:sx1]
-    return out
-
-
 def resize(image: np.ndarray, size: int) -> np.ndarray:
     """Square resize; area averaging when shrinking (anti-aliased), bilinear when growing."""
     import cv2
@@ -165,7 +143,7 @@ def prepare(grey: np.ndarray, mask: np.ndarray, params: HogParams) -> np.ndarray
         side = params.size + 2 * params.pad
         return np.zeros((side, side), np.float32)  # nothing visible: a flat image, all-zero HOG
     composite = np.where(fg, grey, 1.0).astype(np.float32)
-    small = resize(crop_square(composite, box, 1.0), params.size)
+    small = resize(crop_square(composite, *box, fill=1.0), params.size)
     if params.blur_sigma > 0:
         from scipy.ndimage import gaussian_filter
 
@@ -182,7 +160,7 @@ def crop_mask(mask: np.ndarray, size: int) -> np.ndarray:
     box = square_box(fg)
     if box is None:
         return np.zeros((size, size), bool)
-    return resize(crop_square(fg.astype(np.float32), box, 0.0), size) >= 0.5
+    return resize(crop_square(fg.astype(np.float32), *box, fill=0.0), size) >= 0.5
 
 
 def descriptors(greys: np.ndarray, masks: np.ndarray, params: HogParams) -> np.ndarray:

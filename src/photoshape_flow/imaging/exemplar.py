@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from photoshape_flow.imaging.io import BadImageError
+from photoshape_flow.imaging.squares import crop_square
 
 
 @dataclass(frozen=True)
@@ -85,17 +86,6 @@ def foreground_mask(rgb: np.ndarray, options: ExemplarOptions | None = None) -> 
     return mask, threshold
 
 
-def square_crop(rgb: np.ndarray, x0: int, y0: int, side: int, fill: int = 255) -> np.ndarray:
-    """The `side` x `side` window at (x0, y0) of `rgb`, padded with `fill` outside the image."""
-    h, w = rgb.shape[:2]
-    out = np.full((side, side, *rgb.shape[2:]), fill, dtype=rgb.dtype)
-    sx0, sy0 = max(x0, 0), max(y0, 0)
-    sx1, sy1 = min(x0 + side, w), min(y0 + side, h)
-    if sx1 > sx0 and sy1 > sy0:
-        out[sy0 - y0 : sy1 - y0, sx0 - x0 : sx1 - x0] = rgb[sy0:sy1, sx0:sx1]
-    return out
-
-
 def prepare_exemplar(rgb: np.ndarray, options: ExemplarOptions | None = None) -> PreparedExemplar:
     """Mask, crop and resize a decoded photo; BadImageError when there is no usable foreground."""
     import cv2
@@ -127,8 +117,8 @@ def prepare_exemplar(rgb: np.ndarray, options: ExemplarOptions | None = None) ->
     side = int(round(side * (1.0 + 2.0 * options.margin)))
     x0 = int(np.floor((bx0 + bx1 - side) / 2.0))
     y0 = int(np.floor((by0 + by1 - side) / 2.0))
-    crop = square_crop(rgb, x0, y0, side)
-    crop_mask = square_crop(mask.astype(np.uint8) * 255, x0, y0, side, fill=0)
+    crop = crop_square(rgb, x0, y0, side, fill=255)
+    crop_mask = crop_square(mask.astype(np.uint8) * 255, x0, y0, side, fill=0)
     out = min(options.size, side)
     if out != side:
         crop = cv2.resize(crop, (out, out), interpolation=cv2.INTER_AREA)
