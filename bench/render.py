@@ -158,6 +158,18 @@ def cold_probe() -> dict[str, float]:
                                                                    spp=64))
         out["beauty256_second_s"], _ = timed(lambda: renderer.beauty(shape, materials, cameras[41], envmap, size=256,
                                                                     spp=64))
+        # new shape objects with other part counts, as training renders meet them (96^2, 16 spp)
+        from photoshape_flow.geometry.mesh import ShapeMesh
+
+        news = []
+        for k, count in enumerate((9, 8, 6, 5, 7, 3)):
+            part = ShapeMesh(parts=shape.parts[:count])
+            seconds, _ = timed(lambda p=part, k=k: renderer.beauty(p, materials[: len(p.parts)], cameras[k * 37],
+                                                                   envmap, size=96, spp=16, seed=k))
+            news.append(seconds)
+        out["beauty96_new_shapes_s"] = news
+        out["beauty96_same_shape_s"], _ = timed(lambda: renderer.beauty(part, materials[: len(part.parts)], cameras[1],
+                                                                       envmap, size=96, spp=16), 3)
     return out
 
 
@@ -244,6 +256,11 @@ def print_table(r: dict[str, Any]) -> None:
                  f"{c['sweep100_second_s']:.2f} s |")
     lines.append(f"| cold: beauty 256^2@64 first / second | {c['beauty256_first_s']:.2f} s / "
                  f"{c['beauty256_second_s']:.2f} s |")
+    if "beauty96_new_shapes_s" in c:
+        news = c["beauty96_new_shapes_s"]
+        lines.append(f"| cold: beauty 96^2@16 of {len(news)} new shapes (3-9 parts) / same shape again | "
+                     f"mean {statistics.mean(news):.3f} s (after the first {statistics.mean(news[1:]):.3f} s) / "
+                     f"{c['beauty96_same_shape_s']:.3f} s |")
     sys.stdout.write("\n".join(lines) + "\n")
 
 

@@ -188,7 +188,9 @@ def test_beauty_kernel_shared_by_material_kinds(renderer, constant_envmap, tmp_p
 
 
 def test_cached_scene_update_equals_fresh_build(renderer, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    """A second render of the same shape rewrites the loaded scene; it must equal a fresh build."""
+    """A render right after another (other materials, camera, envmap scale and rotation, UV jitter)
+    equals the same render by another Renderer: nothing of the previous render carries over.
+    (tests/render/test_pool.py compares the persistent scene with a freshly loaded one.)"""
     from photoshape_flow.render import Renderer
 
     sky = np.zeros((8, 16, 3), np.float32)

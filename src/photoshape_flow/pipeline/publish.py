@@ -45,6 +45,7 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from photoshape_flow.align.partmap import zoom_to_fit
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -247,6 +248,9 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
     )
 
 
+FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
+
+
 def views_of(camera: Any, views: int) -> list[tuple[str, Any]]:
     """The exemplar's view, then a canonical turntable of `views` azimuths starting at the front (+z).
 
@@ -339,9 +343,12 @@ def run_publish(
                                  images={}, params={"method_key": method_key}, pair_id=pair_id,
                                  status=STATUS_FAILED, error=message[:2000])
             continue
+        # Every view is framed like a product photo: the field of view narrowed until the shape fills it.
+        framed = [(view, zoom_to_fit(item.mesh, camera, margin=FRAME_MARGIN)) for view, camera in
+                  views_of(item.camera, views)]
         jobs = [("photoshape", f"{pair_id}/{method_key}/{view}", camera, item.materials, item.uv_transforms)
-                for view, camera in views_of(item.camera, views)]
-        jobs.append(("builtin", f"{pair_id}/exemplar", item.camera, [None] * len(item.mesh.parts), None))
+                for view, camera in framed]
+        jobs.append(("builtin", f"{pair_id}/exemplar", framed[0][1], [None] * len(item.mesh.parts), None))
         with session_scope(url) as session:
             existing = {kind: _existing(session, kind, [k for kd, k, *_ in jobs if kd == kind])
                         for kind in ("photoshape", "builtin")}

@@ -17,6 +17,7 @@ give the same part IDs.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from typing import Any
 
@@ -25,6 +26,7 @@ import numpy as np
 from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.runtime import ensure_mitsuba
+from photoshape_flow.render.scene import aligned
 
 SHADED_AMBIENT = 0.1
 SHADED_RANGE = 0.8
@@ -32,13 +34,32 @@ MAX_RAYS_PER_LAUNCH = 1 << 22  # ~4M rays: bounded memory, launch overhead amort
 
 
 class RayCaster:
-    """A shape ready for batched pixel-centre ray casting (scene built once, reused for any camera)."""
+    """A scene of one merged mesh for batched pixel-centre ray casting, reused for any camera.
 
-    def __init__(self, shape: ShapeMesh):
+    `set_shape` rewrites the mesh in place (``mi.traverse``), so a caster can serve shape after shape
+    without creating Mitsuba objects: Dr.Jit kernels that dispatch over shapes (this one's
+    ``ray_intersect`` and the path tracer's) depend on every live shape instance, so new instances
+    would recompile them (see `pool`).
+    """
+
+    def __init__(self, shape: ShapeMesh | None = None):
         mi = ensure_mitsuba()
         import drjit as dr
 
         self.mi, self.dr = mi, dr
+        mesh = mi.Mesh("shape", 3, 1, has_vertex_normals=True, has_vertex_texcoords=False)
+        self.scene = mi.load_dict({"type": "scene", "shape": mesh})
+        self.params = mi.traverse(self.scene)
+        # a placeholder (one zero-area triangle) set like any shape: the mesh's traced code depends on
+        # its state, and must not change when the first real shape arrives
+        self._load(np.zeros((3, 3), np.float32), np.array([[0, 1, 2]]), np.tile([[0.0, 1.0, 0.0]], (3, 1)),
+                   np.zeros(1, np.uint32))
+        self.num_faces = 0
+        if shape is not None:
+            self.set_shape(shape)
+
+    def set_shape(self, shape: ShapeMesh) -> None:
+        """Load `shape` (all parts merged into one mesh; the part of a face is kept in `face_part`)."""
         parts = [p for p in shape.parts if len(p.faces) > 0]
         if not parts:
             raise ValueError("shape has no triangles to render")
@@ -49,15 +70,16 @@ class RayCaster:
         face_part = np.concatenate([np.full(len(p.faces), p.index, np.uint32) for p in parts])
         if len(faces) >= 1 << 32:
             raise ValueError(f"shape has too many triangles ({len(faces)})")
-        mesh = mi.Mesh("shape", len(vertices), len(faces), has_vertex_normals=True, has_vertex_texcoords=False)
-        params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(vertices.ravel())
-        params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
-        params["vertex_normals"] = mi.Float(normals.ravel())
-        params.update()
-        self.scene = mi.load_dict({"type": "scene", "shape": mesh})
-        self.face_part = mi.UInt32(face_part)
+        self._load(vertices, faces, normals, face_part)
         self.num_faces = len(faces)
+
+    def _load(self, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, face_part: np.ndarray) -> None:
+        mi, params = self.mi, self.params
+        params["shape.vertex_positions"] = mi.Float(aligned(vertices).ravel())
+        params["shape.faces"] = mi.UInt32(aligned(faces, np.uint32).ravel())
+        params["shape.vertex_normals"] = mi.Float(aligned(normals).ravel())
+        params.update()
+        self.face_part = mi.UInt32(aligned(face_part, np.uint32))
 
     def cast(
         self,
@@ -153,3 +175,35 @@ class RayCaster:
             else:
                 result[name] = array.reshape(shape).astype(np.float32)
         return result
+
+
+CASTER_SLOTS = 4
+_CASTERS: dict[str, list[list[Any]]] = {}  # variant -> [shape weakref | None, RayCaster], most recent last
+
+
+def caster_slots() -> list[list[Any]]:
+    """The process's casters (created on first call, all at once: one change of the set of live shape
+    instances, which every kernel dispatching over shapes depends on)."""
+    mi = ensure_mitsuba()
+    slots = _CASTERS.get(mi.variant())
+    if slots is None:
+        slots = _CASTERS[mi.variant()] = [[None, RayCaster()] for _ in range(CASTER_SLOTS)]
+    return slots
+
+
+def caster_for(shape: ShapeMesh) -> RayCaster:
+    """The process's caster holding `shape`: `CASTER_SLOTS` casters, all created on first use and
+    then retargeted least-recently-used first (`RayCaster.set_shape`), so no Mitsuba object is
+    created per shape. Shapes are recognised by object (weak reference): a shape mutated in place
+    after its first cast is not noticed. Callers hold the render lock."""
+    slots = caster_slots()
+    for i, entry in enumerate(slots):
+        if entry[0] is not None and entry[0]() is shape:
+            slots.append(slots.pop(i))  # by position: == on weak references compares the shapes
+            return entry[1]
+    entry = slots.pop(0)
+    slots.append(entry)
+    entry[0] = None
+    entry[1].set_shape(shape)
+    entry[0] = weakref.ref(shape)
+    return entry[1]

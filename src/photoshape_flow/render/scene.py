@@ -22,9 +22,9 @@ Material mapping (one documented mapping for every material source):
   (all MatSynth ones) already carry that detail.
 - Textures larger than ``max_texture_size`` are downsampled on load (memory: Mitsuba keeps float32).
 
-`update_scene` rewrites the parameters of an already loaded scene (camera, materials, UVs, envmap
-scale and rotation) to what `build_scene` would have built, so more renders of the same shape skip
-the scene load (BVH build, texture uploads).
+`Renderer.beauty` does not load these dicts: it rewrites one persistent scene (`pool.BeautyPool`) to
+what `build_scene` describes, so that new shapes reuse the compiled kernel; `build_scene` stays the
+reference description (tests compare both) and builds the AOV scenes.
 
 UVs: `PartMesh.uvs` follow the OBJ/OpenGL convention (v = 0 at the image's bottom row). The
 texture-scale formula and the `UVTransform` jitter (`specs.uv_matrix`) are baked into each part's
@@ -109,6 +109,23 @@ def mitsuba_uvs(part: PartMesh, material: MaterialSpec | None, jitter: UVTransfo
     return uvs
 
 
+def aligned(values: Any, dtype: Any = np.float32, alignment: int = 64) -> np.ndarray:
+    """`values` as a C-contiguous array whose data starts on a 64-byte boundary (a copy if needed).
+
+    Why: Dr.Jit wraps NumPy memory and uses packet (vector) gathers only from 64-byte aligned
+    buffers, so without this the traced code, and thus the kernel cache key, depends on where NumPy
+    happened to allocate (measured: the path tracer compiled again for a mesh whose UVs moved).
+    """
+    array = np.asarray(values, dtype)
+    if array.flags.c_contiguous and array.ctypes.data % alignment == 0:
+        return array
+    raw = np.empty(array.nbytes + alignment, np.uint8)
+    start = (-raw.ctypes.data) % alignment
+    out = raw[start : start + array.nbytes].view(array.dtype).reshape(array.shape)
+    out[...] = array
+    return out
+
+
 def make_mesh(
     key: str, part: PartMesh, uvs: np.ndarray | None = None, bsdf: Any = None
 ) -> Any:
@@ -117,17 +134,17 @@ def make_mesh(
     props = mi.Properties()
     if bsdf is not None:
         props["bsdf"] = bsdf
-    vertices = np.ascontiguousarray(part.vertices, np.float32)
-    faces = np.ascontiguousarray(part.faces, np.uint32)
+    vertices = aligned(part.vertices)
+    faces = aligned(part.faces, np.uint32)
     mesh = mi.Mesh(
         key, len(vertices), len(faces), props=props, has_vertex_normals=True, has_vertex_texcoords=uvs is not None
     )
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(vertices.ravel())
     params["faces"] = mi.UInt32(faces.ravel())
-    params["vertex_normals"] = mi.Float(np.ascontiguousarray(part.normals, np.float32).ravel())
+    params["vertex_normals"] = mi.Float(aligned(part.normals).ravel())
     if uvs is not None:
-        params["vertex_texcoords"] = mi.Float(np.ascontiguousarray(uvs, np.float32).ravel())
+        params["vertex_texcoords"] = mi.Float(aligned(uvs).ravel())
     params.update()
     return mesh
 
@@ -153,8 +170,7 @@ def _load_texture(path: str, mtime_ns: int, kind: str, max_size: int) -> np.ndar
         factor = max_size / max(width, height)
         bitmap = bitmap.resample([max(1, round(width * factor)), max(1, round(height * factor))])
     array = np.array(bitmap, dtype=np.float32, copy=True)
-    array = array.reshape(array.shape[0], array.shape[1], -1)
-    return array
+    return aligned(array.reshape(array.shape[0], array.shape[1], -1))
 
 
 def texture_array(path: Path, kind: Literal["albedo", "scalar", "normal"], max_size: int) -> np.ndarray:
@@ -170,7 +186,7 @@ def texture_array(path: Path, kind: Literal["albedo", "scalar", "normal"], max_s
 def _constant(value: Sequence[float] | float) -> np.ndarray:
     """A 2x2 constant texture (Mitsuba pads 1x1 bitmaps to 2x2 anyway)."""
     values = np.asarray(value, np.float32).reshape(1, 1, -1)
-    return np.ascontiguousarray(np.broadcast_to(values, (2, 2, values.shape[2])))
+    return aligned(np.broadcast_to(values, (2, 2, values.shape[2])))
 
 
 def material_textures(material: MaterialSpec, max_texture_size: int = 1024) -> dict[str, Any]:
@@ -312,73 +328,3 @@ def build_scene(
         uvs = mitsuba_uvs(part, material, jitters[i] if jitters is not None else None)
         scene[key] = make_mesh(key, part, uvs=uvs, bsdf=bsdf)
     return scene
-
-
-def _fingerprint(value: Any) -> Any:
-    """What `applied` keeps for a value: small arrays by content; large (cached) texture arrays as
-    the object itself, compared by identity (kept alive here, so its id cannot be reused)."""
-    if isinstance(value, np.ndarray) and value.size <= 64:
-        return value.tobytes()
-    return value
-
-
-def update_scene(
-    params: Any,
-    shape: ShapeMesh,
-    materials: Sequence[MaterialSpec],
-    envmap: EnvmapSpec | None,
-    camera: Camera,
-    options: SceneOptions,
-    applied: dict[str, Any] | None = None,
-) -> None:
-    """Set a loaded beauty scene's parameters (``mi.traverse(scene)``) to what `build_scene` would
-    give for these arguments. The scene must come from `build_scene` with the same shape, size,
-    floor and envmap file; only data changes, so nothing is reloaded or recompiled. `applied`
-    (kept by the caller between calls) remembers what each parameter holds, so unchanged textures
-    are not uploaded again."""
-    mi = ensure_mitsuba()
-    applied = {} if applied is None else applied
-    wanted: dict[str, Any] = {
-        "sensor.to_world": camera.to_world(),
-        "sensor.x_fov": float(camera.fov),
-    }
-    if envmap is not None:
-        wanted["emitter.scale"] = float(envmap.scale)
-        wanted["emitter.to_world"] = ("rotate_y", float(envmap.rotation))
-    jitters = options.uv_transforms
-    for i, part in enumerate(shape.parts):
-        if len(part.faces) == 0:
-            continue
-        key = part_key(part.index)
-        data = material_textures(materials[i], options.max_texture_size)
-        bsdf = f"{key}.bsdf.nested_bsdf"
-        for slot in ("base_color", "roughness", "metallic"):
-            wanted[f"{bsdf}.{slot}.data"] = data[slot]
-        wanted[f"{bsdf}.specular"] = data["specular"]
-        wanted[f"{key}.bsdf.normalmap.data"] = data["normalmap"]
-        wanted[f"{key}.vertex_texcoords"] = (materials[i].scale, jitters[i] if jitters is not None else None)
-    for name, value in wanted.items():
-        marker = _fingerprint(value)
-        if name in applied and _same(applied[name], marker):
-            continue
-        if name == "sensor.to_world":
-            params[name] = mi.ScalarTransform4f(value.tolist())
-        elif name == "emitter.to_world":
-            params[name] = mi.ScalarTransform4f().rotate([0, 1, 0], math.degrees(value[1]))
-        elif name.endswith(".vertex_texcoords"):
-            index = part_index_from_key(name.split(".", 1)[0])
-            i = next(k for k, p in enumerate(shape.parts) if p.index == index)
-            uvs = mitsuba_uvs(shape.parts[i], materials[i], value[1])
-            params[name] = mi.Float(np.ascontiguousarray(uvs).ravel())
-        elif isinstance(value, np.ndarray):
-            params[name] = mi.TensorXf(value)
-        else:
-            params[name] = value
-        applied[name] = marker
-    params.update()
-
-
-def _same(a: Any, b: Any) -> bool:
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return a is b
-    return bool(a == b)
