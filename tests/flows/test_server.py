@@ -109,3 +109,60 @@ def test_dask_worker_processes_fan_out_a_stage(prefect_server: dict[str, str], t
     assert len({w.split(":")[-1] for w in workers}) >= 2  # batches ran in more than one worker process
     get_settings.cache_clear()
     get_engine.cache_clear()
+
+
+def test_process_work_pool_with_two_workers_runs_deployments(prefect_server: dict[str, str], tmp_path: Path) -> None:
+    """prefect.yaml deploys as-is to a process pool; two `prefect worker` processes share the runs."""
+    from tests.conftest import REPO_ROOT
+    from tests.pipeline.aligned import make_aligned_pairs
+
+    from photoshape_flow.db import migrate
+    from photoshape_flow.db import models as m
+    from photoshape_flow.db.session import make_engine
+    from photoshape_flow.store import BlobStore
+
+    data_root = tmp_path / "data"
+    url = f"sqlite:///{data_root / 'photoshape.db'}"
+    migrate.upgrade(url)
+    made = make_aligned_pairs(url, BlobStore(data_root / "blobs"), n_pairs=4)
+    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1"}
+    env.pop("PHOTOSHAPE_DATABASE_URL", None)
+    prefect = str(Path(sys.executable).with_name("prefect"))
+    subprocess.run([prefect, "work-pool", "create", "photoshape", "--type", "process"], env=env, check=True,
+                   capture_output=True)
+    deployed = subprocess.run([prefect, "--no-prompt", "deploy", "--all"], env=env, cwd=REPO_ROOT,
+                              capture_output=True, text=True)
+    assert deployed.returncode == 0, deployed.stdout[-2000:] + deployed.stderr[-2000:]
+    workers = [subprocess.Popen([prefect, "worker", "start", "--pool", "photoshape", "--name", f"w{i}"],
+                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(2)]
+    try:
+        runs = []
+        for method in ("color-match", "no-classifier"):
+            out = subprocess.run([prefect, "deployment", "run", "inference/inference", "--param", "profile=tiny",
+                                  "--param", f'methods=["{method}"]', "--param", "batch_size=2"],
+                                 env=env, capture_output=True, text=True, check=True)
+            runs.append(out.stdout)
+
+        async def states(client):  # type: ignore[no-untyped-def]
+            return [r.state_name for r in await client.read_flow_runs()
+                    if r.deployment_id is not None]
+
+        deadline = time.time() + 300
+        seen: list[str] = []
+        while time.time() < deadline:
+            seen = _client_call(env, states)
+            if len(seen) >= 2 and all(s in ("Completed", "Failed", "Crashed") for s in seen):
+                break
+            time.sleep(2)
+        assert seen.count("Completed") == 2, seen
+    finally:
+        for w in workers:
+            w.terminate()
+        for w in workers:
+            w.wait(timeout=30)
+    engine = make_engine(url)
+    with engine.connect() as conn:
+        rows = conn.execute(sa.select(m.Assignment.method, sa.func.count(sa.distinct(m.Assignment.pair_id)))
+                            .group_by(m.Assignment.method)).all()
+    engine.dispose()
+    assert dict(rows) == {"color-match": len(made["pairs"]), "no-classifier": len(made["pairs"])}

@@ -74,6 +74,7 @@ PROFILES: dict[str, Profile] = {
     "small": Profile(
         name="small", exemplar_topk=3, shape_topn=6, fine_size=192,
         bootstrap_count=160, substance_size=96, substance_spp=16, substance_config="cpu",
+        substance_overrides={"epochs": 20},
         training_count=320, training_size=96, training_spp=16, classifier_config="cpu",
         classifier_overrides={"epochs": 4},
         publish_max_rank=1, publish_views=8, publish_size=160, publish_spp=32,
@@ -82,7 +83,7 @@ PROFILES: dict[str, Profile] = {
         name="medium", exemplar_topk=4, shape_topn=12, fine_size=256,
         bootstrap_count=1200, substance_size=128, substance_spp=32, substance_config="cpu",
         training_count=3000, training_size=128, training_spp=32, classifier_config="cpu",
-        classifier_overrides={"epochs": 10},
+        classifier_overrides={"epochs": 12, "max_steps_per_epoch": 80, "image_size": 128},
         publish_max_rank=1, publish_views=8, publish_size=256, publish_spp=64,
     ),
     "default": Profile(name="default"),
