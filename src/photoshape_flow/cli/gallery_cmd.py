@@ -6,19 +6,27 @@ from pathlib import Path
 
 import typer
 
-from photoshape_flow.cli.common import console
+from photoshape_flow.cli.common import console, fail
 
 
 def gallery(
     out: Path = typer.Argument(..., help="Folder to write the site into (index.html, pairs/, img/, downloads/)."),
     method: str = typer.Option("classifier", "--method", "-m", help="Method or exact method key to show."),
+    sheet: Path | None = typer.Option(None, "--sheet", help="Also write a contact-sheet PNG of the best candidates."),
+    sheet_rows: int = typer.Option(6, "--sheet-rows", min=1, help="Candidates on the contact sheet."),
 ) -> None:
     """Write the gallery: exemplars, built-in and PhotoShape renders, materials, grades, downloads, licences."""
-    from photoshape_flow.pipeline.publish import write_gallery_site
+    from photoshape_flow.pipeline.publish import write_contact_sheet, write_gallery_site
 
     index = write_gallery_site(out, method)
     pages = len(list((out / "pairs").glob("*.html")))
     console.print(f"gallery: {pages} PhotoShape page(s); open {index}")
+    if sheet is not None:
+        try:
+            path = write_contact_sheet(sheet, method, rows=sheet_rows)
+        except ValueError as exc:
+            fail(f"{sheet}: {exc}")
+        console.print(f"contact sheet: {path}")
 
 
 def register(app: typer.Typer) -> None:

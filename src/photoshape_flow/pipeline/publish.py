@@ -581,3 +581,15 @@ def write_gallery_site(out_dir: str | Path, method: str | None = None, settings:
     with session_scope(settings.resolved_database_url) as session:
         entries, materials = gallery_data(session, store, method, settings)
     return write_gallery(out_dir, entries, materials)
+
+
+def write_contact_sheet(out: str | Path, method: str | None = None, settings: Settings | None = None,
+                        **kwargs: Any) -> Path:
+    """The best candidates of `method` as one PNG (`export.contact_sheet`); returns its path."""
+    from photoshape_flow.export.contact_sheet import contact_sheet
+
+    settings = settings or get_settings()
+    store = BlobStore(settings.blob_root)
+    with session_scope(settings.resolved_database_url) as session:
+        entries, _ = gallery_data(session, store, method, settings)
+    return contact_sheet(entries, out, **kwargs)
