@@ -166,3 +166,19 @@ def test_previews_are_rendered_when_the_renderer_is_available(db_url: str, store
     preview = store.load_image(_rows(db_url)["wood_oak"].preview_blob)
     assert preview.shape == (32, 32, 3)
     assert preview[16, 16].mean() < 250 and preview[0, 0].min() >= 250  # a sphere on white
+
+
+@pytest.mark.render
+def test_materials_ingested_before_any_envmap_get_previews_later(db_url: str, tmp_path: Path) -> None:
+    from tests.imaging.test_hdr import sky, write_hdr
+
+    from photoshape_flow.pipeline.ingest import ingest_envmaps
+
+    folders = make_folders(tmp_path / "mats")
+    ingest_materials([folders / "wood_oak"], previews=True)  # no envmap yet: skipped
+    assert _rows(db_url)["wood_oak"].preview_blob is None
+    ingest_envmaps([write_hdr(tmp_path / "sky.hdr", sky())], isolate=False)  # catches up
+    preview = _rows(db_url)["wood_oak"].preview_blob
+    assert preview is not None
+    again = ingest_materials([folders / "wood_oak"], previews=True)  # present with a preview: nothing redone
+    assert again.present and _rows(db_url)["wood_oak"].preview_blob == preview

@@ -205,4 +205,10 @@ def ingest_envmaps(
         summary.warn(name, f"moved to {new_split} so that train and val both have an envmap")
     logger.info("envmaps: %d added, %d present, %d replaced, %d rejected", len(summary.added),
                 len(summary.present), len(summary.replaced), len(summary.rejected))
+    if summary.added or summary.replaced:  # materials ingested before any envmap get their previews now
+        from photoshape_flow.pipeline.ingest_materials import materials_without_preview, render_material_previews
+
+        missing = materials_without_preview(url)
+        if missing:
+            summary.warnings.extend(render_material_previews(missing, settings=settings).warnings)
     return summary

@@ -142,8 +142,10 @@ def ingest_materials(
         if progress is not None:
             progress(label, done, len(folders))
     emit_material_event(settings, summary.new_material_ids)
-    if previews and (summary.added or summary.replaced):
-        preview = render_material_previews(summary.added + summary.replaced, settings=settings, size=preview_size)
+    # previews for this batch, and for materials still without one (e.g. ingested before any envmap)
+    pending = summary.added + summary.replaced + [i for i in materials_without_preview(url) if i in summary.present]
+    if previews and pending:
+        preview = render_material_previews(pending, settings=settings, size=preview_size)
         summary.skipped.extend(preview.skipped)
         summary.warnings.extend(preview.warnings)
     logger.info("materials: %d added, %d present, %d replaced, %d rejected", len(summary.added),
@@ -239,6 +241,15 @@ def _ingest_folder(
         logger.info("%s: replaced material %d (new content)", label, material_id)
     else:
         summary.added.append(material_id)
+
+
+def materials_without_preview(url: str) -> list[int]:
+    """Ids of usable materials that have no preview render yet."""
+    with session_scope(url) as session:
+        return list(session.execute(
+            sa.select(m.Material.id).where(m.Material.status == STATUS_OK, m.Material.preview_blob.is_(None))
+            .order_by(m.Material.id)
+        ).scalars())
 
 
 def render_material_previews(
