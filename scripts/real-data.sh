@@ -30,16 +30,17 @@ generate_demo(Path('$DEMO'), size='small')"
 fi
 
 $PS db upgrade
-shapes=("$SHARED/models")
-[ -d "$SH3D" ] && shapes+=("$SH3D")
-$PS ingest shapes "${shapes[@]}" --category chair,sofa,stool,bench
+$PS ingest envmaps "$SHARED/envmaps" "$DEMO/envmaps"
+$PS ingest materials "$SHARED/materials" "$DEMO/materials"
+$PS ingest shapes "$SHARED/models/sweethome3d" --license GPL-2.0-or-later \
+  --attribution "Sweet Home 3D default furniture catalog, eTeks (Emmanuel Puybaret)"
+$PS ingest shapes "$SHARED"/models/polyhaven_* --license CC0-1.0 --attribution "Poly Haven (polyhaven.com)"
+[ -d "$SH3D" ] && $PS ingest shapes "$SH3D" --category chair,sofa,stool,bench  # catalogs carry their licences
 $PS ingest exemplars "$SHARED/photos/abo" --category chair --source abo \
   --license CC-BY-4.0 --attribution "Amazon Berkeley Objects, (c) Amazon.com, CC BY 4.0" \
   --source-url https://amazon-berkeley-objects.s3.amazonaws.com/index.html
-$PS ingest materials "$SHARED/materials" "$DEMO/materials"
-$PS ingest envmaps "$SHARED/envmaps" "$DEMO/envmaps"
 for stage in coarse-alignment fine-alignment substances training-renders training inference publish; do
   $PS run "$stage" --profile "$PROFILE"
 done
-$PS gallery "$ROOT/gallery"
+$PS gallery "$ROOT/gallery" --sheet "$ROOT/contact-sheet.png"
 $PS status
