@@ -60,3 +60,15 @@ def test_doctor_reports_each_check(db_url: str) -> None:
     result = runner.invoke(app, ["doctor"])
     for name in ("python", "database", "schema", "data root", "free disk", "torch"):
         assert name in result.output
+
+
+def test_read_verbs_on_an_unmigrated_database_fail_with_one_line(settings_env: Path, tmp_path: Path) -> None:
+    photo = tmp_path / "photo.png"
+    photo.write_bytes(b"not read before the database check")
+    for args in (("gallery", str(tmp_path / "site")), ("export", "--out", str(tmp_path / "out")),
+                 ("grade", "1", "good"), ("retrieve", str(photo), "--mask", str(photo)),
+                 ("eval", str(tmp_path / "gt.json"))):
+        result = invoke(*args)
+        assert result.exit_code == 1, args
+        assert "not migrated; run `photoshape db upgrade`" in result.output.replace("\n", " "), args
+        assert "Traceback" not in result.output, args

@@ -36,3 +36,17 @@ def get_store():  # type: ignore[no-untyped-def]
     from photoshape_flow.store import BlobStore
 
     return BlobStore(get_settings().blob_root)
+
+
+def require_database() -> None:
+    """Fail with one line when the database cannot be reached or is not migrated to the head."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import migrate
+
+    url = get_settings().resolved_database_url
+    try:
+        up_to_date = migrate.is_up_to_date()
+    except Exception as exc:
+        fail(f"{url}: cannot connect ({str(exc).splitlines()[0]})")
+    if not up_to_date:
+        fail(f"{url}: not migrated; run `photoshape db upgrade`")

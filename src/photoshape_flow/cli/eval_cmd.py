@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, fail, require_database
 
 
 def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
@@ -30,6 +30,7 @@ def eval_command(
     source: str = typer.Option(None, help="Only exemplars of this ingest source (e.g. demo-small)."),
 ) -> None:
     """Compare pipeline outputs with ground truth; prints a table and stores it in `evaluation`."""
+    require_database()
     from photoshape_flow.config import get_settings
     from photoshape_flow.pipeline.evaluate import EVAL_STAGES, run_evaluation
 

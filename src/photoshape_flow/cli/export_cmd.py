@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, fail, require_database
 
 
 def export(
@@ -25,6 +25,7 @@ def export(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""
+    require_database()
     from photoshape_flow.export.bundle import parse_formats
     from photoshape_flow.pipeline.publish import export_candidates
 

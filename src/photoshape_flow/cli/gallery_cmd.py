@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, fail, require_database
 
 
 def gallery(
@@ -16,6 +16,7 @@ def gallery(
     sheet_rows: int = typer.Option(6, "--sheet-rows", min=1, help="Candidates on the contact sheet."),
 ) -> None:
     """Write the gallery: exemplars, built-in and PhotoShape renders, materials, grades, downloads, licences."""
+    require_database()
     from photoshape_flow.pipeline.publish import write_contact_sheet, write_gallery_site
 
     index = write_gallery_site(out, method)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, fail, require_database
 from photoshape_flow.vocab import GRADES
 
 
@@ -18,6 +18,7 @@ def grade(
 
     Grades are queryable in SQL: SELECT * FROM grade JOIN photoshape_candidate USING (pair_id).
     """
+    require_database()
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.publish import record_grade

@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, fail, require_database
 
 
 def retrieve(
@@ -29,6 +29,7 @@ def retrieve(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of tables."),
 ) -> None:
     """Rank materials for masked regions of a photo with the trained material classifier."""
+    require_database()
     import cv2
     import numpy as np
     import sqlalchemy as sa
