@@ -17,7 +17,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, err_console, fail
+from photoshape_flow.cli.common import console, err_console, fail, require_database
 
 ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps.", no_args_is_help=True)
 
@@ -35,19 +35,6 @@ def _setup_logging(verbose: bool) -> None:
     elif not logging.getLogger().handlers and not package.handlers:
         # the summary prints every rejection; keep logging's last-resort handler from repeating them
         package.addHandler(logging.NullHandler())
-
-
-def _check_database() -> None:
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.db import migrate
-
-    url = get_settings().resolved_database_url
-    try:
-        ok = migrate.is_up_to_date()
-    except Exception as exc:
-        fail(f"{url}: cannot connect ({exc})")
-    if not ok:
-        fail(f"{url}: not migrated; run `photoshape db upgrade`")
 
 
 @contextmanager
@@ -108,7 +95,7 @@ def shapes(
     from photoshape_flow.pipeline.ingest import IngestLimits, ingest_shapes
 
     _setup_logging(verbose)
-    _check_database()
+    require_database()
     if split not in (None, "train", "val"):
         fail(f"--split must be train or val, not {split!r}")
     limits = IngestLimits(max_faces=max_faces, max_shape_bytes=int(max_file_mb * 1024 * 1024), timeout_s=timeout)
@@ -139,7 +126,7 @@ def exemplars(
     from photoshape_flow.pipeline.ingest import IngestLimits, ingest_exemplars
 
     _setup_logging(verbose)
-    _check_database()
+    require_database()
     if size < 16:
         fail("--size must be at least 16")
     limits = IngestLimits(max_image_pixels=int(max_megapixels * 1_000_000))
@@ -164,7 +151,7 @@ def materials(
     from photoshape_flow.pipeline.ingest import ingest_materials
 
     _setup_logging(verbose)
-    _check_database()
+    require_database()
     with _progress("materials") as progress:
         summary = ingest_materials(paths, substance=substance, source=source, license=license,
                                    attribution=attribution, previews=previews, progress=progress)
@@ -185,7 +172,7 @@ def envmaps(
     from photoshape_flow.pipeline.ingest import ingest_envmaps
 
     _setup_logging(verbose)
-    _check_database()
+    require_database()
     if split not in (None, "train", "val"):
         fail(f"--split must be train or val, not {split!r}")
     with _progress("envmaps") as progress:

@@ -7,7 +7,7 @@ import json
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, setup_logging
+from photoshape_flow.cli.common import console, fail, require_database, setup_logging
 from photoshape_flow.vocab import STAGES
 
 
@@ -28,7 +28,6 @@ def run(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
-    from photoshape_flow.db import migrate
     from photoshape_flow.pipeline.runner import PROFILES, run_all, run_stage
 
     setup_logging(verbose)
@@ -36,8 +35,7 @@ def run(
         fail(f"unknown stage {stage!r}; choose from {', '.join(STAGES)} or all")
     if profile not in PROFILES:
         fail(f"unknown profile {profile!r}; choose from {', '.join(PROFILES)}")
-    if not migrate.is_up_to_date():
-        fail("the database is not migrated; run `photoshape db upgrade`")
+    require_database()
     if stage == "all":
         results = run_all(profile, on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
     else:

@@ -5,24 +5,17 @@ from __future__ import annotations
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, require_database
 
 
 def status() -> None:
     """Counts per table and per stage: done / pending / failed."""
     from photoshape_flow.config import get_settings
-    from photoshape_flow.db import migrate
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.progress import stage_progress, table_counts
 
     settings = get_settings()
-    try:
-        if not migrate.is_up_to_date():
-            fail(f"{settings.resolved_database_url}: not migrated; run `photoshape db upgrade`")
-    except typer.Exit:
-        raise
-    except Exception as exc:
-        fail(f"{settings.resolved_database_url}: cannot connect ({exc})")
+    require_database()
     with session_scope() as session:
         stages = stage_progress(session)
         tables = table_counts(session)
