@@ -143,8 +143,9 @@ def ingest_materials(
             progress(label, done, len(folders))
     emit_material_event(settings, summary.new_material_ids)
     # previews for this batch, and for materials still without one (e.g. ingested before any envmap)
-    pending = summary.added + summary.replaced + [i for i in materials_without_preview(url) if i in summary.present]
-    if previews and pending:
+    pending = (summary.added + summary.replaced
+               + [i for i in materials_without_preview(url) if i in summary.present]) if previews else []
+    if pending:
         preview = render_material_previews(pending, settings=settings, size=preview_size)
         summary.skipped.extend(preview.skipped)
         summary.warnings.extend(preview.warnings)
