@@ -11,11 +11,18 @@ from tests.classify.regiondata import TOY_MATERIALS, substance_of, write_renders
 from torch import nn
 
 from photoshape_flow.classify import checkpoint as ckpt
+from photoshape_flow.classify import train as train_module
 from photoshape_flow.classify.augment import AugmentConfig
 from photoshape_flow.classify.configs import get_config
 from photoshape_flow.classify.dataset import RegionDataset, find_regions
 from photoshape_flow.classify.resnet import build_model
-from photoshape_flow.classify.train import evaluate, resolve_device, train_classifier
+from photoshape_flow.classify.train import (
+    evaluate,
+    learning_rate,
+    resolve_device,
+    select_best,
+    train_classifier,
+)
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 MATERIALS = list(TOY_MATERIALS)
@@ -115,3 +122,52 @@ def test_too_little_data_and_device_resolution(tmp_path: Path) -> None:
         train_classifier(model, data, None, config, materials=MATERIALS, material_substances=SUBSTANCES)
     assert resolve_device("cpu").type == "cpu"
     assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def test_cosine_schedule_runs_from_lr_to_the_floor() -> None:
+    config = get_config("tiny", lr=1e-2, lr_schedule="cosine", lr_floor=0.1)
+    rates = [learning_rate(config, step, 11) for step in range(11)]
+    assert rates[0] == pytest.approx(1e-2) and rates[-1] == pytest.approx(1e-3)
+    assert rates[5] == pytest.approx(5.5e-3)  # half way: the mean of lr and floor
+    assert all(a > b for a, b in zip(rates, rates[1:], strict=False))
+    assert learning_rate(get_config("tiny", lr=1e-2), 7, 11) == 1e-2  # constant: the paper's fixed rate
+    with pytest.raises(ValueError, match="lr_schedule"):
+        learning_rate(get_config("tiny", lr_schedule="step"), 0, 10)
+
+
+def test_best_validation_epoch_is_kept_across_a_resume(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    train = _datasets(tmp_path / "t", 6, augment=AugmentConfig())
+    val = _datasets(tmp_path / "v", 4)
+    config = get_config("tiny", epochs=4, batch_size=4, max_steps_per_epoch=2, select_metric="mtl@1")
+    # validation scores scripted per epoch: the best is epoch 2, later epochs are worse
+    scores = iter([0.25, 0.75, 0.5, 0.5, 0.25, 0.75, 0.5, 0.5])
+
+    def scripted(*args: Any, **kwargs: Any) -> dict[str, Any]:
+        return {"mtl@1": next(scores), "mtl@5": 1.0, "sub@1": 0.5, "sub-mtl@1": 0.5}
+
+    monkeypatch.setattr(train_module, "evaluate", scripted)
+    snapshots: list[dict[str, torch.Tensor]] = []
+
+    def fresh():  # type: ignore[no-untyped-def]
+        return build_model(config.arch, len(MATERIALS), width=config.width, seed=0)
+
+    full = train_classifier(fresh(), train, val, config, materials=MATERIALS, material_substances=SUBSTANCES,
+                            save=lambda c: snapshots.append(c["model"]))
+    assert full.best_epoch == 2 and full.epoch == 4
+    assert full.metrics["epoch"] == 2 and full.metrics["mtl@1"] == 0.75
+    chosen = select_best(full.checkpoint)  # type: ignore[arg-type]
+    assert chosen["selected_epoch"] == 2 and chosen["epoch"] == 4 and "best" not in chosen
+    for key, value in snapshots[1].items():  # the epoch-2 weights, not the last ones
+        assert torch.equal(chosen["model"][key], value), key
+    assert not all(torch.equal(snapshots[3][k], v) for k, v in chosen["model"].items())
+
+    # interrupted after epoch 3 and resumed from the serialised checkpoint: still epoch 2's weights
+    first = train_classifier(fresh(), train, val, config, materials=MATERIALS, material_substances=SUBSTANCES,
+                             stop_after_epochs=3)
+    restored = ckpt.load(ckpt.to_bytes(first.checkpoint))  # type: ignore[arg-type]
+    resumed = train_classifier(ckpt.build_model(restored), train, val, config, materials=MATERIALS,
+                               material_substances=SUBSTANCES, resume=restored)
+    assert resumed.best_epoch == 2
+    reloaded = select_best(resumed.checkpoint)  # type: ignore[arg-type]
+    for key, value in chosen["model"].items():
+        assert torch.equal(reloaded["model"][key], value), key

@@ -60,7 +60,7 @@ def test_training_writes_an_ok_classifier_with_table4_metrics_and_is_idempotent(
     for key in ("mtl@1", "mtl@5", "sub@1", "sub-mtl@1"):
         assert 0.0 <= row.metrics[key] <= 1.0
     assert row.metrics["val_renderings"] == 3 and row.metrics["val_source"] == "split"
-    assert len(row.metrics["history"]) == 2
+    assert len(row.metrics["history"]) == 2 and row.metrics["selected_epoch"] == 2  # tiny keeps the last
     with session_scope(db_url) as session:
         metrics = set(session.scalars(sa.select(Evaluation.metric).where(Evaluation.run == row.name)))
     assert metrics == {"mtl@1", "mtl@5", "sub@1", "sub-mtl@1"}
@@ -96,6 +96,21 @@ def test_killed_training_resumes_from_its_checkpoint(db_url: str, store, monkeyp
     done = _classifier(db_url, row.id)
     assert done.status == "ok" and done.epoch == 2 and done.error is None
     assert done.metrics["history"][0] == first_epoch  # continued, not restarted
+
+
+def test_the_stored_model_is_the_best_validation_epoch(db_url: str, store) -> None:
+    from photoshape_flow.classify import checkpoint as ckpt
+
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 10, "a")
+    classifier_id = run_training("tiny", overrides={"epochs": 4, "select_metric": "mtl@1"})
+    row = _classifier(db_url, classifier_id)
+    history = row.metrics["history"]
+    best = max(history, key=lambda h: h["mtl@1"])  # the first of equals, as the loop keeps it
+    assert row.metrics["selected_epoch"] == best["epoch"] and row.metrics["mtl@1"] == best["mtl@1"]
+    assert row.epoch == 4
+    stored = ckpt.load(store.read_bytes(row.checkpoint_blob))
+    assert stored["selected_epoch"] == best["epoch"] and "best" not in stored and "optimizer" not in stored
 
 
 def test_new_materials_fine_tune_the_previous_classifier(db_url: str, store) -> None:

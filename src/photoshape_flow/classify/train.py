@@ -9,6 +9,12 @@ continues exactly where it stopped: the shuffling order and every augmentation a
 generators seeded by (config seed, epoch, example), not from global state, so a resumed run takes
 the same steps as an uninterrupted one.
 
+With ``config.lr_schedule == "cosine"`` the learning rate follows a cosine from ``lr`` down to
+``lr * lr_floor`` over all steps of the run, set before every step from the global step index (no
+scheduler state, so resuming needs nothing extra). With ``config.select_metric`` the loop also keeps
+the weights of the epoch with the best validation value of that metric (in the checkpoint, so a
+resumed run still knows them); `select_best` turns a final checkpoint into one holding those weights.
+
 Table 4 metrics (background excluded from the rankings: a region is known to hold a material):
 ``mtl@1`` / ``mtl@5`` top-1 / top-5 material precision, ``sub@1`` top-1 of the substance head,
 ``sub-mtl@1`` top-1 of the substance implied by summing material probabilities per substance.
@@ -75,6 +81,39 @@ def material_substance_index(material_substances: Sequence[str]) -> torch.Tensor
     return torch.tensor([0, *(substance_label(s) for s in material_substances)], dtype=torch.long)
 
 
+def learning_rate(config: ClassifierConfig, step: int, total_steps: int) -> float:
+    """The learning rate of global step `step` (0-based) of a run of `total_steps` steps."""
+    if config.lr_schedule == "constant":
+        return config.lr
+    if config.lr_schedule != "cosine":
+        raise ValueError(f"unknown lr_schedule {config.lr_schedule!r}; expected 'constant' or 'cosine'")
+    progress = min(max(step, 0) / max(total_steps - 1, 1), 1.0)
+    floor = config.lr * config.lr_floor
+    return floor + 0.5 * (config.lr - floor) * (1.0 + math.cos(math.pi * progress))
+
+
+def _better(value: Any, best: Any) -> bool:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return False
+    return best is None or float(value) > float(best)
+
+
+def select_best(checkpoint: dict[str, Any]) -> dict[str, Any]:
+    """The checkpoint with its weights replaced by the best validation epoch's (when it kept one).
+
+    ``selected_epoch`` records the epoch whose weights the result holds; ``epoch`` stays the number
+    of epochs trained.
+    """
+    best = checkpoint.get("best")
+    out = {k: v for k, v in checkpoint.items() if k != "best"}
+    if best is None:
+        out["selected_epoch"] = int(checkpoint["epoch"])
+        return out
+    out["model"] = best["model"]
+    out["selected_epoch"] = int(best["epoch"])
+    return out
+
+
 @torch.inference_mode()
 def evaluate(
     model: MaterialResNet,
@@ -124,9 +163,18 @@ class TrainResult:
     epoch: int
     history: list[dict[str, Any]] = field(default_factory=list)
     checkpoint: dict[str, Any] | None = None
+    best_epoch: int | None = None  # the epoch `select_best` picks (None: no validation metric kept one)
+
+    @property
+    def selected_epoch(self) -> int:
+        return self.best_epoch if self.best_epoch is not None else self.epoch
 
     @property
     def metrics(self) -> dict[str, Any]:
+        """The history entry of the selected epoch (the best one when a metric selects, else the last)."""
+        for entry in self.history:
+            if entry.get("epoch") == self.selected_epoch:
+                return dict(entry)
         return dict(self.history[-1]) if self.history else {}
 
 
@@ -157,12 +205,14 @@ def train_classifier(
     loss_fn = make_loss(config)
     history: list[dict[str, Any]] = []
     start_epoch = 0
+    best: dict[str, Any] | None = None  # {"epoch", "metric", "value", "model"}: the selected weights
     if resume is not None:
         model.load_state_dict(resume["model"])
         if "loss" in resume:
             loss_fn.load_state_dict(resume["loss"])
         start_epoch = int(resume["epoch"])
         history = list(resume.get("history") or [])
+        best = resume.get("best")
     model.to(device)
     loss_fn.to(device)
     if config.channels_last:
@@ -187,13 +237,18 @@ def train_classifier(
         num_batches = len(train_set) // batch_size
         if config.max_steps_per_epoch:
             num_batches = min(num_batches, config.max_steps_per_epoch)
+        total_steps = total_epochs * num_batches
         sampler = order[: num_batches * batch_size].tolist()
         loader = DataLoader(train_set, batch_size=batch_size, sampler=sampler, num_workers=config.num_workers,
                             pin_memory=device.type == "cuda", persistent_workers=False)
         model.train()
         sums = {"loss": 0.0, "material": 0.0, "substance": 0.0}
         images = 0
-        for x, y_mat, y_sub in loader:
+        for step, (x, y_mat, y_sub) in enumerate(loader):
+            lr = learning_rate(config, epoch * num_batches + step, total_steps)
+            optimizer.param_groups[0]["lr"] = lr
+            for group in optimizer.param_groups[1:]:  # the log-variances follow the same schedule
+                group["lr"] = lr
             x = x.to(device, non_blocking=True)
             if config.channels_last:
                 x = x.contiguous(memory_format=torch.channels_last)
@@ -220,6 +275,7 @@ def train_classifier(
             "train_substance_loss": sums["substance"] / max(images, 1),
             "log_var_material": float(loss_fn.log_var_material.detach()),
             "log_var_substance": float(loss_fn.log_var_substance.detach()),
+            "lr": optimizer.param_groups[0]["lr"],
             "train_seconds": train_seconds,
             "images_per_s": images / train_seconds if train_seconds > 0 else None,
         }
@@ -228,6 +284,9 @@ def train_classifier(
                                   device=device, num_workers=config.num_workers))
             if not config.substance_weight:  # Table 4 "sub = N": the substance head is untrained
                 entry["sub@1"] = None
+        if config.select_metric and _better(entry.get(config.select_metric), best and best["value"]):
+            best = {"epoch": epoch + 1, "metric": config.select_metric, "value": float(entry[config.select_metric]),
+                    "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}}
         entry["seconds"] = time.perf_counter() - started
         history.append(entry)
         log.info("epoch %d/%d: %s", epoch + 1, total_epochs, _summary(entry))
@@ -235,11 +294,14 @@ def train_classifier(
             model, materials=materials, material_substances=material_substances, image_size=config.image_size,
             config=config_dict, epoch=epoch + 1, history=history, optimizer=optimizer, loss=loss_fn, extra=extra,
         )
+        if best is not None:
+            last["best"] = best
         if save is not None:
             save(last)
         epochs_run += 1
     final_epoch = start_epoch + epochs_run
-    return TrainResult(model=model, loss=loss_fn, epoch=final_epoch, history=history, checkpoint=last)
+    return TrainResult(model=model, loss=loss_fn, epoch=final_epoch, history=history, checkpoint=last,
+                       best_epoch=int(best["epoch"]) if best is not None else None)
 
 
 def _summary(entry: dict[str, Any]) -> str:

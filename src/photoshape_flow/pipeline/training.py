@@ -15,7 +15,9 @@
    ones), training starts from it: `grow_material_head` keeps the trained rows, adds the new ones,
    and only `config.finetune_epochs` are run (`parent_id` records it). `finetune_from` forces a parent.
 5. Each epoch's checkpoint goes to the blob store, then onto the row (blob first, then row). At the
-   end the row gets the slim (inference) checkpoint, the Table 4 metrics and status "ok"; the
+   end the row gets the slim (inference) checkpoint, holding the weights of the best validation
+   epoch when the config has a `select_metric` (else the last), that epoch's Table 4 metrics
+   (`metrics.selected_epoch` says which) and status "ok"; the
    metrics are also written as `Evaluation` rows (run = classifier name, stage "training").
 """
 
@@ -184,9 +186,13 @@ def _parent_candidate(
     return newest if old and old < set(materials.ids) else None
 
 
-def _metrics(history: list[dict[str, Any]], **extra: Any) -> dict[str, Any]:
+def _metrics(history: list[dict[str, Any]], selected_epoch: int | None = None, **extra: Any) -> dict[str, Any]:
+    """Table 4 metrics of the selected epoch (default: the last), plus totals over the whole run."""
     last = history[-1] if history else {}
+    if selected_epoch is not None:
+        last = next((h for h in history if h.get("epoch") == selected_epoch), last)
     metrics: dict[str, Any] = {key: last.get(key) for key in METRIC_KEYS}
+    metrics["selected_epoch"] = last.get("epoch")
     for key in ("val_material_loss", "val_examples", "train_loss", "log_var_material", "log_var_substance"):
         metrics[key] = last.get(key)
     seconds = [h.get("train_seconds") or 0.0 for h in history]
@@ -223,7 +229,7 @@ def run_training(
     from photoshape_flow.classify import checkpoint as ckpt
     from photoshape_flow.classify.dataset import RegionDataset, find_regions
     from photoshape_flow.classify.resnet import build_model, grow_material_head
-    from photoshape_flow.classify.train import resolve_device, train_classifier
+    from photoshape_flow.classify.train import resolve_device, select_best, train_classifier
 
     settings = settings or get_settings()
     cfg = config if isinstance(config, ClassifierConfig) else get_config(config, **(overrides or {}))
@@ -338,9 +344,11 @@ def run_training(
         if final is None:  # already complete before this call (resumed at the last epoch)
             final = resume
         assert final is not None
-        ref = store.put_bytes(ckpt.to_bytes(ckpt.slim(final)), "pt")
+        final = select_best(ckpt.slim(final))  # the best validation epoch's weights when the config selects
+        ref = store.put_bytes(ckpt.to_bytes(final), "pt")
         metrics = _metrics(
             result.history,
+            final["selected_epoch"],
             epochs=result.epoch,
             train_examples=len(train_examples),
             val_examples=len(val_examples),
