@@ -5,8 +5,9 @@ material top-1/top-5 against the ground truth for
   - none:        the material head alone,
   - network:     x the substance segmentation network's confidence (PartSubstance.probs; the default),
   - head:        x the classifier's own substance head,
-  - both:        x the product of the two.
-Prints a table and writes bench/results/substance_weighting.json.
+  - both:        x the product of the two;
+and the substance accuracy of each ranking's top-1 material, next to the substance network's own
+argmax (what the no-classifier baseline picks). Prints a table and writes bench/results/substance_weighting.json.
 
     python bench/substance_weighting.py [groundtruth.json]
 """
@@ -49,7 +50,7 @@ def main() -> None:
         ).all()
         for pair, alignment in pairs:
             exemplar = session.get(m.Exemplar, pair.exemplar_id)
-            labels, mats, _ = truth_labels(truths[exemplar.id], exemplar)
+            labels, mats, true_subs = truth_labels(truths[exemplar.id], exemplar)
             part_map = _part_map(store, alignment, labels.shape[0])
             image = store.load_image(exemplar.image_blob)[..., :3]
             subs = {ps.part_id: ps for ps in session.execute(
@@ -61,27 +62,32 @@ def main() -> None:
                 winner = _majority(labels, mask)
                 if winner is None or mask.sum() < 16 or part.id not in subs or not subs[part.id].observed:
                     continue
-                items.append((mask, mats[winner - 1], substance_vector(subs[part.id].probs)))
+                items.append((mask, mats[winner - 1], substance_vector(subs[part.id].probs),
+                              true_subs[winner - 1], subs[part.id].substance))
             if not items:
                 continue
             mat_probs, head_probs = clf.predict(image, [i[0] for i in items])
-            for k, (_, truth, network) in enumerate(items):
+            for k, (_, truth, network, true_sub, network_sub) in enumerate(items):
+                hits["network argmax (substance only)"].append((float("nan"), float("nan"),
+                                                                float(network_sub == true_sub)))
                 variants = {"none": None, "network": network, "head": head_probs[k],
                             "both": network * head_probs[k]}
                 for name, weights in variants.items():
                     ranked = clf.top_k(mat_probs[k:k + 1], None if weights is None else weights[None], k=5,
                                        weight_by_substance=weights is not None)[0]
                     picked = [names[r.material_id] for r in ranked]
-                    hits[name].append((float(picked[:1] == [truth]), float(truth in picked)))
+                    hits[name].append((float(picked[:1] == [truth]), float(truth in picked),
+                                       float(ranked[0].substance == true_sub)))
     result = {
         name: {"material_top1": float(np.mean([h[0] for h in v])), "material_top5": float(np.mean([h[1] for h in v])),
-               "parts": len(v)}
+               "substance_accuracy": float(np.mean([h[2] for h in v])), "parts": len(v)}
         for name, v in hits.items()
     }
     print(f"classifier {row.name} on {gt_path}")
-    print("| weighting | top-1 | top-5 | parts |\n|---|---:|---:|---:|")
+    print("| weighting | top-1 | top-5 | substance acc. | parts |\n|---|---:|---:|---:|---:|")
     for name, r in result.items():
-        print(f"| {name} | {r['material_top1']:.3f} | {r['material_top5']:.3f} | {r['parts']} |")
+        print(f"| {name} | {r['material_top1']:.3f} | {r['material_top5']:.3f} | {r['substance_accuracy']:.3f} "
+              f"| {r['parts']} |")
     out = Path(__file__).parent / "results" / "substance_weighting.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"groundtruth": str(gt_path), "classifier": row.name, "results": result}, indent=2))
