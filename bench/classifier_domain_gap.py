@@ -1,0 +1,57 @@
+"""How much of the classifier's error on exemplars is the alignment, and how much the photos?
+
+Runs the material head alone (no substance weighting) on every ground-truth material region of the
+demo exemplars, i.e. with perfect masks, and prints top-1 / top-5. Compare with the validation
+renders' mtl@1 / mtl@5 (the classifier row's metrics) and with the aligned parts
+(bench/substance_weighting.py, weighting "none"): the first gap is renders vs photos, the second
+the fine alignment's masks.
+
+    PHOTOSHAPE_DATA_ROOT=... python bench/classifier_domain_gap.py [CLASSIFIER_ID]
+"""
+
+from __future__ import annotations
+
+import sys
+
+import sqlalchemy as sa
+
+from photoshape_flow.config import get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.demo import load_groundtruth
+from photoshape_flow.pipeline.evaluate import _exemplar_truths, truth_labels
+from photoshape_flow.pipeline.training import load_material_classifier
+from photoshape_flow.store import BlobStore
+
+
+def main() -> None:
+    settings = get_settings()
+    store = BlobStore(settings.blob_root)
+    gt = load_groundtruth(sorted((settings.data_root / "demo").glob("*/groundtruth.json"))[-1])
+    classifier_id = int(sys.argv[1]) if len(sys.argv) > 1 else None
+    row, clf = load_material_classifier(classifier_id, settings=settings)
+    top1 = top5 = regions = 0
+    with session_scope() as session:
+        names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
+        for exemplar_id, truth in _exemplar_truths(session, gt, None).items():
+            exemplar = session.get(m.Exemplar, exemplar_id)
+            labels, materials, _ = truth_labels(truth, exemplar)
+            image = store.load_image(exemplar.image_blob)[..., :3]
+            masks = [(labels == k, materials[k - 1]) for k in range(1, len(materials) + 1)]
+            masks = [(mask, name) for mask, name in masks if mask.sum() >= 16]
+            if not masks:
+                continue
+            probs, _ = clf.predict(image, [mask for mask, _ in masks])
+            for ranked, (_, name) in zip(clf.top_k(probs, None, k=5, weight_by_substance=False), masks, strict=True):
+                picked = [names[r.material_id] for r in ranked]
+                top1 += picked[0] == name
+                top5 += name in picked
+                regions += 1
+    metrics = row.metrics or {}
+    print(f"classifier {row.name} (id {row.id})")
+    print(f"validation renders: mtl@1 {metrics.get('mtl@1')}, mtl@5 {metrics.get('mtl@5')}")
+    print(f"exemplar ground-truth regions ({regions}): top-1 {top1 / regions:.3f}, top-5 {top5 / regions:.3f}")
+
+
+if __name__ == "__main__":
+    main()
