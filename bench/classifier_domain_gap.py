@@ -18,7 +18,7 @@ import sqlalchemy as sa
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.demo import load_groundtruth
+from photoshape_flow.demo import load_groundtruth, newest_groundtruth
 from photoshape_flow.pipeline.evaluate import _exemplar_truths, truth_labels
 from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.store import BlobStore
@@ -27,7 +27,10 @@ from photoshape_flow.store import BlobStore
 def main() -> None:
     settings = get_settings()
     store = BlobStore(settings.blob_root)
-    gt = load_groundtruth(sorted((settings.data_root / "demo").glob("*/groundtruth.json"))[-1])
+    gt_path = newest_groundtruth(settings.data_root)
+    if gt_path is None:
+        sys.exit(f"{settings.data_root}: no demo ground truth; run `photoshape demo` first")
+    gt = load_groundtruth(gt_path)
     classifier_id = int(sys.argv[1]) if len(sys.argv) > 1 else None
     row, clf = load_material_classifier(classifier_id, settings=settings)
     top1 = top5 = regions = 0

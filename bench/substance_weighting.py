@@ -26,7 +26,7 @@ from photoshape_flow.classify.assignment import substance_vector
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.demo import load_groundtruth
+from photoshape_flow.demo import load_groundtruth, newest_groundtruth
 from photoshape_flow.pipeline.evaluate import _exemplar_truths, _majority, _part_map, truth_labels
 from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.store import BlobStore
@@ -34,8 +34,9 @@ from photoshape_flow.store import BlobStore
 
 def main() -> None:
     settings = get_settings()
-    demos = sorted((settings.data_root / "demo").glob("*/groundtruth.json"))
-    gt_path = Path(sys.argv[1]) if len(sys.argv) > 1 else demos[-1]
+    gt_path = Path(sys.argv[1]) if len(sys.argv) > 1 else newest_groundtruth(settings.data_root)
+    if gt_path is None:
+        sys.exit(f"{settings.data_root}: no demo ground truth; run `photoshape demo` or pass groundtruth.json")
     gt = load_groundtruth(gt_path)
     store = BlobStore(settings.blob_root)
     row, clf = load_material_classifier(settings=settings)

@@ -32,14 +32,13 @@ def eval_command(
     """Compare pipeline outputs with ground truth; prints a table and stores it in `evaluation`."""
     require_database()
     from photoshape_flow.config import get_settings
+    from photoshape_flow.demo import newest_groundtruth
     from photoshape_flow.pipeline.evaluate import EVAL_STAGES, run_evaluation
 
     if groundtruth is None:
-        candidates = sorted((get_settings().data_root / "demo").glob("*/groundtruth.json"),
-                            key=lambda p: p.stat().st_mtime)
-        if not candidates:
+        groundtruth = newest_groundtruth(get_settings().data_root)
+        if groundtruth is None:
             fail("no ground truth given and no demo under the data root; run `photoshape demo` first")
-        groundtruth = candidates[-1]
     if not groundtruth.is_file():
         fail(f"{groundtruth}: no such file")
     bad = [s for s in stage or [] if s not in EVAL_STAGES]

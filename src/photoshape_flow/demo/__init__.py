@@ -14,6 +14,7 @@ from photoshape_flow.demo.groundtruth import (
     PartTruth,
     ShapeTruth,
     load_groundtruth,
+    newest_groundtruth,
 )
 
 __all__ = [
@@ -28,4 +29,5 @@ __all__ = [
     "SizePreset",
     "generate_demo",
     "load_groundtruth",
+    "newest_groundtruth",
 ]

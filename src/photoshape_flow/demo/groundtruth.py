@@ -188,3 +188,9 @@ def load_groundtruth(path: Path | str) -> GroundTruth:
     except (OSError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: cannot read ground truth ({exc})") from exc
     return parse_groundtruth(data, path.parent)
+
+
+def newest_groundtruth(data_root: Path | str) -> Path | None:
+    """The most recently written <data_root>/demo/*/groundtruth.json (None when there is no demo)."""
+    candidates = sorted(Path(data_root).joinpath("demo").glob("*/groundtruth.json"), key=lambda p: p.stat().st_mtime)
+    return candidates[-1] if candidates else None
