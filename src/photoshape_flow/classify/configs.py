@@ -13,8 +13,9 @@
   mtl@1 swung between 0.20 and 0.42 from one epoch to the next), and the epoch with the best
   validation mtl@1 is the one kept. Hue jitter is +-0.02 of a turn (the default 0.05 is +-18
   degrees, larger than the colour differences between the demo's materials of one substance and
-  than any white balance error of a photo). ``finetune_epochs`` is used when the
-  material set grew and training starts from the previous classifier.
+  than the demo exemplars' white-balance jitter; not measured separately from the other two
+  changes). ``finetune_epochs`` is used when the material set grew and training starts from the
+  previous classifier.
 * ``paper``: section 5.2 as published. ResNet-34 at 224 px, SGD with a fixed learning rate of 1e-4,
   momentum 0.9, weight decay 1e-4 (never on the log-variances), uncertainty-weighted loss with
   s_m = 0, s_s = -1, about 100 epochs, the last epoch kept; ImageNet weights when `pretrained` names a torchvision

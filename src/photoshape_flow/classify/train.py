@@ -172,10 +172,16 @@ class TrainResult:
     @property
     def metrics(self) -> dict[str, Any]:
         """The history entry of the selected epoch (the best one when a metric selects, else the last)."""
-        for entry in self.history:
-            if entry.get("epoch") == self.selected_epoch:
-                return dict(entry)
-        return dict(self.history[-1]) if self.history else {}
+        return dict(history_entry(self.history, self.selected_epoch))
+
+
+def history_entry(history: Sequence[dict[str, Any]], epoch: int | None = None) -> dict[str, Any]:
+    """The history entry of `epoch` (the last entry when `epoch` is None or absent; {} when empty)."""
+    if epoch is not None:
+        for entry in history:
+            if entry.get("epoch") == epoch:
+                return entry
+    return history[-1] if history else {}
 
 
 def train_classifier(
@@ -246,8 +252,7 @@ def train_classifier(
         images = 0
         for step, (x, y_mat, y_sub) in enumerate(loader):
             lr = learning_rate(config, epoch * num_batches + step, total_steps)
-            optimizer.param_groups[0]["lr"] = lr
-            for group in optimizer.param_groups[1:]:  # the log-variances follow the same schedule
+            for group in optimizer.param_groups:  # the log-variances' group follows the same schedule
                 group["lr"] = lr
             x = x.to(device, non_blocking=True)
             if config.channels_last:
@@ -284,9 +289,6 @@ def train_classifier(
                                   device=device, num_workers=config.num_workers))
             if not config.substance_weight:  # Table 4 "sub = N": the substance head is untrained
                 entry["sub@1"] = None
-        if config.select_metric and _better(entry.get(config.select_metric), best and best["value"]):
-            best = {"epoch": epoch + 1, "metric": config.select_metric, "value": float(entry[config.select_metric]),
-                    "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}}
         entry["seconds"] = time.perf_counter() - started
         history.append(entry)
         log.info("epoch %d/%d: %s", epoch + 1, total_epochs, _summary(entry))
@@ -294,6 +296,10 @@ def train_classifier(
             model, materials=materials, material_substances=material_substances, image_size=config.image_size,
             config=config_dict, epoch=epoch + 1, history=history, optimizer=optimizer, loss=loss_fn, extra=extra,
         )
+        value = entry.get(config.select_metric) if config.select_metric else None
+        if _better(value, best["value"] if best is not None else None):
+            # the checkpoint's own copy of the weights (torch.save stores shared tensors once)
+            best = {"epoch": epoch + 1, "metric": config.select_metric, "value": float(value), "model": last["model"]}
         if best is not None:
             last["best"] = best
         if save is not None:

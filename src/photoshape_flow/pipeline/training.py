@@ -188,9 +188,9 @@ def _parent_candidate(
 
 def _metrics(history: list[dict[str, Any]], selected_epoch: int | None = None, **extra: Any) -> dict[str, Any]:
     """Table 4 metrics of the selected epoch (default: the last), plus totals over the whole run."""
-    last = history[-1] if history else {}
-    if selected_epoch is not None:
-        last = next((h for h in history if h.get("epoch") == selected_epoch), last)
+    from photoshape_flow.classify.train import history_entry
+
+    last = history_entry(history, selected_epoch)
     metrics: dict[str, Any] = {key: last.get(key) for key in METRIC_KEYS}
     metrics["selected_epoch"] = last.get("epoch")
     for key in ("val_material_loss", "val_examples", "train_loss", "log_var_material", "log_var_substance"):
