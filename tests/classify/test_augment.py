@@ -2,9 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import pytest
 import torch
 
-from photoshape_flow.classify.augment import AugmentConfig, augment, rotate_hue, sample_affine, warp
+from photoshape_flow.classify.augment import (
+    AugmentConfig,
+    augment,
+    gaussian_blur,
+    rotate_hue,
+    sample_affine,
+    warp,
+)
 
 GEOMETRY_ONLY = AugmentConfig(brightness=0.0, contrast=0.0, saturation=0.0, hue=0.0, rotation_deg=25.0)
 
@@ -90,3 +100,30 @@ def test_sample_affine_respects_crop_bounds() -> None:
         half_w, half_h, cx, cy = float(theta[0, 0]), float(theta[1, 1]), float(theta[0, 2]), float(theta[1, 2])
         assert abs(cx) + half_w <= 1.0 + 1e-6 and abs(cy) + half_h <= 1.0 + 1e-6
         assert 0.5 - 1e-6 <= half_w * half_h <= 1.0 + 1e-6 or half_w == 1.0 or half_h == 1.0
+
+
+def test_gaussian_blur_smooths_noise_and_keeps_flat_images() -> None:
+    flat = torch.full((3, 16, 16), 0.4)
+    assert torch.allclose(gaussian_blur(flat, 1.0), flat, atol=1e-6)  # normalised kernel, reflected borders
+    noise = torch.rand(3, 32, 32, generator=torch.Generator().manual_seed(0))
+    blurred = gaussian_blur(noise, 1.0)
+    assert blurred.shape == noise.shape
+    assert float(blurred.std()) < 0.5 * float(noise.std())
+    assert float(blurred.mean()) == pytest.approx(float(noise.mean()), abs=0.01)
+    assert gaussian_blur(noise, 0.0) is noise
+
+
+def test_blur_option_blurs_the_image_not_the_mask() -> None:
+    image, mask = _pattern()
+    sharp_cfg = AugmentConfig(brightness=0.0, contrast=0.0, saturation=0.0, hue=0.0, rotation_deg=0.0,
+                              crop_scale=(1.0, 1.0), aspect_ratio=(1.0, 1.0), hflip=False)
+    blur_cfg = replace(sharp_cfg, blur=2.0)
+    edge = lambda x: float((x[0, :, 1:] - x[0, :, :-1]).abs().max())  # noqa: E731
+    edges = []
+    for seed in range(8):  # sigma ~ U(0, 2): some draws barely blur, most do
+        sharp_img, sharp_mask = augment(image, mask, 40, sharp_cfg, torch.Generator().manual_seed(seed))
+        blur_img, blur_mask = augment(image, mask, 40, blur_cfg, torch.Generator().manual_seed(seed))
+        assert torch.equal(sharp_mask, blur_mask)  # geometry unchanged: the mask stays binary and in place
+        assert edge(sharp_img) == pytest.approx(1.0)
+        edges.append(edge(blur_img))
+    assert sum(e < 0.6 for e in edges) >= 4

@@ -11,7 +11,7 @@ import torch
 from tests.classify.regiondata import TOY_MATERIALS, substance_of, write_renders
 
 from photoshape_flow.classify.augment import AugmentConfig
-from photoshape_flow.classify.dataset import RegionDataset, RenderItem, find_regions, make_input
+from photoshape_flow.classify.dataset import RegionDataset, RenderItem, find_regions, frame_object, make_input
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 
@@ -71,3 +71,23 @@ def test_make_input_resizes_image_and_mask(tmp_path: Path) -> None:
     x = make_input(image, mask, 16)
     assert x.shape == (4, 16, 16)
     assert torch.equal(x[3, :8], torch.ones(8, 16)) and torch.equal(x[3, 8:], torch.zeros(8, 16))
+
+
+def test_frame_object_crops_renders_to_the_exemplar_square(tmp_path: Path) -> None:
+    """A render is cut to the square around its object, as an exemplar is: the object then fills it."""
+    ids = np.zeros((40, 40), np.uint16)
+    ids[10:30, 14:24] = 7  # a 20 x 10 object: its square is 20 x 20, centred on it
+    item = _write(tmp_path, ids)
+    image, framed = frame_object(cv2.imread(str(item.image))[..., ::-1], ids)
+    assert framed.shape == (20, 20) and image.shape == (20, 20, 3)
+    assert (framed > 0).any(axis=1).all()  # the object spans the full height
+    assert (framed[:, :5] == 0).all() and (framed[:, 15:] == 0).all()
+    assert (image[framed == 0] == 255).all()  # white beside the object, as in the render
+    empty = np.zeros((8, 8), np.uint16)
+    assert frame_object(np.zeros((8, 8, 3), np.uint8), empty)[1] is empty  # no object: unchanged
+
+    examples = find_regions([item], [7], substance_of())
+    plain = RegionDataset([item], examples, size=20)[0][0]
+    framed_x = RegionDataset([item], examples, size=20, frame=True)[0][0]
+    assert float(framed_x[3].mean()) == pytest.approx(0.5)  # 20 x 10 of the 20 x 20 square
+    assert float(plain[3].mean()) == pytest.approx(200 / 1600, abs=0.02)

@@ -79,3 +79,14 @@ def test_top_k_weights_by_substance_and_never_ranks_background() -> None:
     plain = classifier.top_k(material, substance, k=2, weight_by_substance=False)[0]
     assert [r.material_id for r in plain] == [9, 4]
     assert all(r.material_id != 0 for r in classifier.top_k(material, None, k=10)[0])
+
+
+def test_predict_averages_each_region_with_its_mirror_image() -> None:
+    image, masks = _image_and_masks()
+    plain = load_classifier(_checkpoint(), device="cpu")
+    plain.flip = False
+    mat, sub = plain.predict(image, masks)
+    mirrored_mat, mirrored_sub = plain.predict(image[:, ::-1], [mask[:, ::-1] for mask in masks])
+    both_mat, both_sub = load_classifier(_checkpoint(), device="cpu").predict(image, masks)
+    assert np.allclose(both_mat, 0.5 * (mat + mirrored_mat), atol=1e-5)
+    assert np.allclose(both_sub, 0.5 * (sub + mirrored_sub), atol=1e-5)

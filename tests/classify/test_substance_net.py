@@ -11,6 +11,7 @@ import torch
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.classify.substance_train import (
     SubstanceData,
+    augment,
     checkpoint_from_bytes,
     checkpoint_to_bytes,
     confusion_matrix,
@@ -111,3 +112,31 @@ def test_metrics_from_confusion() -> None:
     assert metrics["iou"]["background"] == pytest.approx(0.5)
     assert metrics["iou"]["leather"] == pytest.approx(2 / 3)
     assert metrics["iou"]["wood"] is None
+
+
+def test_training_frames_renders_and_blur_is_seeded() -> None:
+    """Renders are cut to the square around the object before training (as exemplars are)."""
+    label = np.zeros((40, 40), np.uint8)
+    label[5:15, 10:30] = 2  # a 10 x 20 object: its square is 20 x 20
+    image = np.full((40, 40, 3), 255, np.uint8)
+    image[label > 0] = COLOURS[2]
+    framed = SubstanceData([image], [label], ["k"]).framed()
+    assert framed.labels[0].shape == (20, 20) and framed.images[0].shape == (20, 20, 3)
+    assert (framed.labels[0] > 0).any(axis=0).all()  # the object spans the full width
+    assert framed.keys == ["k"]
+
+    config = replace(get_config("tiny"), blur=1.5)
+    a = augment(image, label, config, np.random.default_rng(4))
+    b = augment(image, label, config, np.random.default_rng(4))
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_predict_substances_averages_the_mirrored_view() -> None:
+    torch.manual_seed(0)
+    model = SubstanceNet(width=8).eval()
+    image = _toy_data(1, size=32, seed=3).images[0]
+    single = predict_substances(model, image, size=32, flip=False)
+    mirrored = predict_substances(model, image[:, ::-1], size=32, flip=False)[..., ::-1]
+    both = predict_substances(model, image, size=32)
+    assert np.allclose(both, 0.5 * (single + mirrored), atol=1e-5)
+    assert np.allclose(both.sum(axis=0), 1.0, atol=1e-5)

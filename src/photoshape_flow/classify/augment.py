@@ -7,7 +7,10 @@ is one affine map sampled once with ``grid_sample`` for the image and the mask t
 aligned by construction. Pixels from outside the source are white in the image (the renders and
 exemplars sit on white) and 0 in the mask. A crop that keeps under ``min_mask_kept`` of the region is
 redrawn (up to ``max_tries``) and finally falls back to the whole image, so an example never loses
-the region it is labelled by. Colour shifts (brightness, contrast, saturation, hue) touch the image only.
+the region it is labelled by. Colour shifts (brightness, contrast, saturation, hue) and an optional
+Gaussian blur (``blur``: sigma drawn from U(0, blur) source pixels, before the warp; it smooths the
+path tracer's per-pixel noise, which low-sample training renders show and photos do not) touch the
+image only.
 
 Everything is drawn from an explicit `torch.Generator`, seeded per example by the dataset, so an
 epoch's augmentations are reproducible and a resumed training run sees the same images.
@@ -35,6 +38,7 @@ class AugmentConfig:
     contrast: float = 0.2
     saturation: float = 0.2
     hue: float = 0.05  # fraction of a full turn of the hue circle
+    blur: float = 0.0  # maximum Gaussian sigma in source pixels (0: off, as in the paper)
     min_mask_kept: float = 0.25
     max_tries: int = 4
 
@@ -95,6 +99,21 @@ def prefilter(image: torch.Tensor, mask: torch.Tensor, size: int) -> tuple[torch
     return out[:3], out[3:]
 
 
+def gaussian_blur(image: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Separable Gaussian blur of a (C, H, W) image (reflected borders); sigma <= 0.05 returns it as is."""
+    if sigma <= 0.05:
+        return image
+    radius = max(1, int(math.ceil(3.0 * sigma)))
+    taps = torch.arange(-radius, radius + 1, dtype=image.dtype)
+    kernel = torch.exp(-0.5 * (taps / sigma) ** 2)
+    kernel = kernel / kernel.sum()
+    channels = image.shape[0]
+    x = image.unsqueeze(1)  # (C, 1, H, W): one depthwise pass per channel
+    x = F.conv2d(F.pad(x, (radius, radius, 0, 0), mode="reflect"), kernel.view(1, 1, 1, -1))
+    x = F.conv2d(F.pad(x, (0, 0, radius, radius), mode="reflect"), kernel.view(1, 1, -1, 1))
+    return x.view(channels, *image.shape[1:])
+
+
 def color_jitter(image: torch.Tensor, config: AugmentConfig, generator: torch.Generator) -> torch.Tensor:
     """Random brightness, contrast, saturation and hue shifts of a (3, H, W) image in [0, 1]."""
     weights = torch.tensor([0.299, 0.587, 0.114], dtype=image.dtype).view(3, 1, 1)
@@ -133,6 +152,8 @@ def augment(
     if not config.enabled:
         return resize(image, mask, size)
     image, mask = prefilter(image, mask, size)
+    if config.blur > 0:
+        image = gaussian_blur(image, _uniform(generator, 0.0, config.blur))
     source_fraction = float(mask.mean())
     out_image = out_mask = None
     for _ in range(max(1, config.max_tries)):

@@ -16,6 +16,13 @@
   than the demo exemplars' white-balance jitter; not measured separately from the other two
   changes). ``finetune_epochs`` is used when the material set grew and training starts from the
   previous classifier.
+
+Two options stay off in every configuration because they measured worse on the medium demo
+(2026-11-22, docs/results.md): ``frame_object`` (cut each training render to the square around its
+object, as exemplars are cut; an object spans ~70% of a training render, all of an exemplar, but
+framing upsamples the 128-px renders and blurs their textures) together with ``augment.blur`` (a
+random Gaussian blur against the renders' sampling noise): exemplar top-1 / top-5 0.334 / 0.663
+with both against 0.359 / 0.685 without.
 * ``paper``: section 5.2 as published. ResNet-34 at 224 px, SGD with a fixed learning rate of 1e-4,
   momentum 0.9, weight decay 1e-4 (never on the log-variances), uncertainty-weighted loss with
   s_m = 0, s_s = -1, about 100 epochs, the last epoch kept; ImageNet weights when `pretrained` names a torchvision
@@ -63,6 +70,7 @@ class ClassifierConfig:
     pretrained: str | None = None  # torchvision-format ImageNet .pth (RGB filters of conv1 + backbone)
     min_region_fraction: float = 0.005
     background_every: int = 4  # one background example per n renderings (0: none)
+    frame_object: bool = False  # crop renders to the square around the object, as exemplars are cropped
     val_fraction: float = 0.1  # held out by key hash when no rendering has split "val"
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     eval_batch_size: int = 64

@@ -76,6 +76,7 @@ class MaterialClassifier:
         image_size: int,
         device: torch.device | str = "cpu",
         batch_size: int = 32,
+        flip: bool = True,
     ):
         self.device = torch.device(device)
         self.model = model.to(self.device).eval()
@@ -83,6 +84,7 @@ class MaterialClassifier:
         self.material_substances = list(material_substances)
         self.image_size = int(image_size)
         self.batch_size = int(batch_size)
+        self.flip = bool(flip)
         self._substance_index = material_substance_index(self.material_substances)
 
     @property
@@ -110,15 +112,24 @@ class MaterialClassifier:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Softmax probabilities per mask: materials (K, |M| + 1) and substances (K, len(SUBSTANCE_LABELS)).
 
-        Column 0 of both is background; material column i is `self.materials[i - 1]`.
+        Column 0 of both is background; material column i is `self.materials[i - 1]`. With `flip`
+        (the default) each region is also classified mirrored and the two softmaxes averaged: a
+        material does not depend on left and right, training used flips, and the mean of two equally
+        valid views is a steadier estimate for one more forward pass.
         """
         x = self.inputs(image_rgb, masks, crop)
         mats, subs = [], []
         for start in range(0, len(x), self.batch_size):
             batch = x[start:start + self.batch_size].to(self.device)
+            n = len(batch)
+            if self.flip:
+                batch = torch.cat([batch, batch.flip(-1)])
             mat_logits, sub_logits = self.model(batch)
-            mats.append(mat_logits.softmax(1).float().cpu())
-            subs.append(sub_logits.softmax(1).float().cpu())
+            mat, sub = mat_logits.softmax(1).float().cpu(), sub_logits.softmax(1).float().cpu()
+            if self.flip:
+                mat, sub = 0.5 * (mat[:n] + mat[n:]), 0.5 * (sub[:n] + sub[n:])
+            mats.append(mat)
+            subs.append(sub)
         if not mats:
             return np.zeros((0, self.num_materials + 1), np.float32), np.zeros((0, len(SUBSTANCE_LABELS)), np.float32)
         return torch.cat(mats).numpy(), torch.cat(subs).numpy()

@@ -47,7 +47,7 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-CODE_VERSION = "inference-1"
+CODE_VERSION = "inference-2"  # 2: flip-averaged classifier probabilities
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
 

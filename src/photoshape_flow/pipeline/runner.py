@@ -82,6 +82,7 @@ PROFILES: dict[str, Profile] = {
     "medium": Profile(
         name="medium", exemplar_topk=4, shape_topn=12, fine_size=256,
         bootstrap_count=1200, substance_size=128, substance_spp=32, substance_config="cpu",
+        substance_overrides={"epochs": 60},
         training_count=3000, training_size=128, training_spp=32, classifier_config="cpu",
         classifier_overrides={"epochs": 12, "max_steps_per_epoch": 80, "image_size": 128},
         publish_max_rank=1, publish_views=8, publish_size=256, publish_spp=64,

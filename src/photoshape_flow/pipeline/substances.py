@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 
 ALIGNMENT_METHOD = "flow-crf"
 STATUS_TRAINING = "training"
-RULE_VERSION = "part-substances-v1"
+RULE_VERSION = "part-substances-v2"  # v2: flip-averaged substance probabilities
 
 
 def _hash(payload: Any) -> str:

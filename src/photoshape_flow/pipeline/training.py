@@ -302,8 +302,10 @@ def run_training(
                 f"only {len(train_examples)} training regions in {len(data.train)} renderings of kind "
                 f"{'/'.join(kinds)}; run the training-renders stage first"
             )
-        train_set = RegionDataset(data.train, train_examples, cfg.image_size, cfg.augment, seed=cfg.seed)
-        val_set = RegionDataset(data.val, val_examples, cfg.image_size) if val_examples else None
+        train_set = RegionDataset(data.train, train_examples, cfg.image_size, cfg.augment, seed=cfg.seed,
+                                  frame=cfg.frame_object)
+        val_set = (RegionDataset(data.val, val_examples, cfg.image_size, frame=cfg.frame_object)
+                   if val_examples else None)
 
         resume = ckpt.load(store.read_bytes(resume_ref)) if resume_ref else None
         if resume is not None:
