@@ -93,7 +93,7 @@ SIZES: dict[str, SizePreset] = {
         shapes=72,
         heldout_shapes=16,
         per_substance=6,
-        envmaps=8,
+        envmaps=26,  # + 4 held out = the paper's 30 studio envmaps (section 3.3)
         heldout_envmaps=4,
         exemplars=200,
         exemplar_size=320,
