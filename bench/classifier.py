@@ -6,7 +6,8 @@ sees a GPU:
 * train: forward + backward + SGD step (momentum, weight decay) on a random batch, train mode;
 * infer (net): forward in eval mode under `torch.inference_mode` on a batch of inputs;
 * infer (predict): `MaterialClassifier.predict` on one 256x256 image with `batch` masks, i.e. with
-  the per-mask preprocessing (square pad, resize) that the inference stage pays.
+  the per-mask preprocessing (square pad, resize) that the inference stage pays; single view (the
+  pipeline also classifies each region's mirror image, `flip=True`: two forward passes per mask).
 
 Usage::
 
@@ -83,7 +84,7 @@ def bench_one(arch: str, size: int, batch: int, iters: int, warmup: int, device:
     infer_s = _timed(infer_step, iters, warmup, device)
 
     classifier = MaterialClassifier(model, list(range(1, NUM_MATERIALS + 1)), ["wood"] * NUM_MATERIALS, size,
-                                    device=device, batch_size=batch)
+                                    device=device, batch_size=batch, flip=False)
     rng = np.random.default_rng(0)
     image = rng.integers(0, 255, (256, 256, 3), dtype=np.uint8)
     masks = []

@@ -1,7 +1,8 @@
 """How much of the classifier's error on exemplars is the alignment, and how much the photos?
 
 Runs the material head alone (no substance weighting) on every ground-truth material region of the
-demo exemplars, i.e. with perfect masks, and prints top-1 / top-5. Compare with the validation
+demo exemplars, i.e. with perfect masks, and prints top-1 / top-5, with and without averaging each
+region's prediction with its mirror image (`MaterialClassifier.flip`, on in the pipeline). Compare with the validation
 renders' mtl@1 / mtl@5 (the classifier row's metrics) and with the aligned parts
 (bench/substance_weighting.py, weighting "none"): the first gap is renders vs photos, the second
 the fine alignment's masks.
@@ -33,7 +34,8 @@ def main() -> None:
     gt = load_groundtruth(gt_path)
     classifier_id = int(sys.argv[1]) if len(sys.argv) > 1 else None
     row, clf = load_material_classifier(classifier_id, settings=settings)
-    top1 = top5 = regions = 0
+    counts = {flip: [0, 0] for flip in (False, True)}
+    regions = 0
     with session_scope() as session:
         names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
         for exemplar_id, truth in _exemplar_truths(session, gt, None).items():
@@ -44,16 +46,21 @@ def main() -> None:
             masks = [(mask, name) for mask, name in masks if mask.sum() >= 16]
             if not masks:
                 continue
-            probs, _ = clf.predict(image, [mask for mask, _ in masks])
-            for ranked, (_, name) in zip(clf.top_k(probs, None, k=5, weight_by_substance=False), masks, strict=True):
-                picked = [names[r.material_id] for r in ranked]
-                top1 += picked[0] == name
-                top5 += name in picked
-                regions += 1
+            regions += len(masks)
+            for flip in (False, True):
+                clf.flip = flip
+                probs, _ = clf.predict(image, [mask for mask, _ in masks])
+                ranked_all = clf.top_k(probs, None, k=5, weight_by_substance=False)
+                for ranked, (_, name) in zip(ranked_all, masks, strict=True):
+                    picked = [names[r.material_id] for r in ranked]
+                    counts[flip][0] += picked[0] == name
+                    counts[flip][1] += name in picked
     metrics = row.metrics or {}
     print(f"classifier {row.name} (id {row.id})")
     print(f"validation renders: mtl@1 {metrics.get('mtl@1')}, mtl@5 {metrics.get('mtl@5')}")
-    print(f"exemplar ground-truth regions ({regions}): top-1 {top1 / regions:.3f}, top-5 {top5 / regions:.3f}")
+    for flip, (top1, top5) in counts.items():
+        print(f"exemplar ground-truth regions ({regions}), {'flip-averaged' if flip else 'single view'}: "
+              f"top-1 {top1 / regions:.3f}, top-5 {top5 / regions:.3f}")
 
 
 if __name__ == "__main__":
