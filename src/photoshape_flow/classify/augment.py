@@ -8,7 +8,8 @@ aligned by construction. Pixels from outside the source are white in the image (
 exemplars sit on white) and 0 in the mask. A crop that keeps under ``min_mask_kept`` of the region is
 redrawn (up to ``max_tries``) and finally falls back to the whole image, so an example never loses
 the region it is labelled by. Colour shifts (brightness, contrast, saturation, hue) and an optional
-Gaussian blur (``blur``: sigma drawn from U(0, blur) source pixels, before the warp; it smooths the
+Gaussian blur (``blur``: sigma drawn from U(0, blur) pixels of the prefiltered source, before the
+warp; it smooths the
 path tracer's per-pixel noise, which low-sample training renders show and photos do not) touch the
 image only.
 

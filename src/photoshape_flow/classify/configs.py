@@ -19,8 +19,8 @@
 
 Two options stay off in every configuration because they measured worse on the medium demo
 (2026-11-22, docs/results.md): ``frame_object`` (cut each training render to the square around its
-object, as exemplars are cut; an object spans ~70% of a training render, all of an exemplar, but
-framing upsamples the 128-px renders and blurs their textures) together with ``augment.blur`` (a
+object, as exemplars are cut; an object spans ~70% of a training render, all of an exemplar;
+likely harmful because it upsamples the 128-px renders and softens their textures) with ``augment.blur`` (a
 random Gaussian blur against the renders' sampling noise): exemplar top-1 / top-5 0.334 / 0.663
 with both against 0.359 / 0.685 without.
 * ``paper``: section 5.2 as published. ResNet-34 at 224 px, SGD with a fixed learning rate of 1e-4,
@@ -28,7 +28,7 @@ with both against 0.359 / 0.685 without.
   s_m = 0, s_s = -1, about 100 epochs, the last epoch kept; ImageNet weights when `pretrained` names a torchvision
   ``resnet34`` .pth file (the paper starts from ImageNet, then OpenSurfaces substance pretraining,
   which is not reproduced). Meant for CUDA (`settings.device` = auto picks it when present); on the
-  2-core CPU one epoch over 10k regions is ~22 min.
+  2-core CPU one epoch over 10k regions is ~17 min (9.9 img/s, bench/classifier.py, 2026-11-22).
 
 `get_config(name, **overrides)` returns a frozen dataclass; `config_hash` is the part of the
 classifier's params_hash that depends on the configuration.
