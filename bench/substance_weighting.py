@@ -1,13 +1,21 @@
-"""Which substance confidence should weight the classifier's material probabilities (section 5.2.4)?
+"""Which evidence should weight the classifier's material probabilities (section 5.2.4 and beyond)?
 
 Measured on a demo database after `photoshape demo` (PHOTOSHAPE_DATA_ROOT pointing at it): per-part
 material top-1/top-5 against the ground truth for
-  - none:        the material head alone,
-  - network:     x the substance segmentation network's confidence (PartSubstance.probs; the default),
-  - head:        x the classifier's own substance head,
-  - both:        x the product of the two;
+  - none:             the material head alone,
+  - network:          x the substance segmentation network's confidence (PartSubstance.probs; the paper),
+  - head:             x the classifier's own substance head,
+  - both:             x the product of the two,
+  - network + colour: x the network's confidence x the colour likelihood of `classify.color_prior`
+                      (the pipeline's default), with sigma fit on the validation renders, and at
+                      sigma / 2 and 2 sigma to show how sensitive it is,
+  - colour only:      the colour likelihood alone (the colour-matching baseline's ranking),
+  - sqrt(material head) x network x colour: the material head tempered (T = 2), a diagnostic of
+                      whether the material head is over-confident against the other two,
 and the substance accuracy of each ranking's top-1 material, next to the substance network's own
-argmax (what the no-classifier baseline picks). Prints a table and writes bench/results/substance_weighting.json.
+argmax (what the no-classifier baseline picks). First, on the validation renders (where sigma is fit):
+the material head with and without the colour likelihood, on the renders' exact material regions.
+Prints tables and writes bench/results/substance_weighting.json.
 
     python bench/substance_weighting.py [groundtruth.json]
 """
@@ -22,14 +30,58 @@ from pathlib import Path
 import numpy as np
 import sqlalchemy as sa
 
-from photoshape_flow.classify.assignment import substance_vector
+from photoshape_flow.classify.assignment import median_lab, substance_vector
+from photoshape_flow.classify.color_prior import (
+    color_likelihood,
+    fit_color_sigma,
+    material_lab_matrix,
+    region_color_distances,
+)
+from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
 from photoshape_flow.pipeline.evaluate import _exemplar_truths, _majority, _part_map, truth_labels
-from photoshape_flow.pipeline.training import load_material_classifier
+from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
+from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
+
+
+def _summary(hits: dict[str, list[tuple[float, float, float]]]) -> dict[str, dict[str, float]]:
+    return {
+        name: {"material_top1": float(np.mean([h[0] for h in v])), "material_top5": float(np.mean([h[1] for h in v])),
+               "substance_accuracy": float(np.nanmean([h[2] for h in v])), "parts": len(v)}
+        for name, v in hits.items()
+    }
+
+
+def _print(title: str, result: dict[str, dict[str, float]]) -> None:
+    print(f"\n{title}\n| ranking | top-1 | top-5 | substance acc. | regions |\n|---|---:|---:|---:|---:|")
+    for name, r in result.items():
+        print(f"| {name} | {r['material_top1']:.3f} | {r['material_top5']:.3f} | {r['substance_accuracy']:.3f} "
+              f"| {r['parts']} |")
+
+
+def validation_renders(clf, data, labs: np.ndarray, sigma: float) -> dict[str, dict[str, float]]:
+    """Material head with and without the colour likelihood on the validation renders' material regions."""
+    index = {mid: i for i, mid in enumerate(clf.materials)}
+    hits: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
+    for item in data.val[:COLOR_SIGMA_RENDERS]:
+        ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
+        minimum = int(np.ceil(0.005 * ids.size))
+        regions = [(int(v), ids == v) for v, c in zip(*np.unique(ids, return_counts=True), strict=True)
+                   if v != 0 and c >= minimum and int(v) in index]
+        if not regions:
+            continue
+        probs, _ = clf.predict(rgb, [mask for _, mask in regions])
+        for k, (mid, mask) in enumerate(regions):
+            colour = color_likelihood(median_lab(rgb, mask), labs, sigma)[None]
+            for name, weights in (("none", None), ("colour", colour)):
+                ranked = clf.top_k(probs[k:k + 1], None, k=5, weight_by_substance=False, color_weights=weights)[0]
+                picked = [r.material_id for r in ranked]
+                hits[name].append((float(picked[0] == mid), float(mid in picked), float("nan")))
+    return _summary(hits)
 
 
 def main() -> None:
@@ -40,10 +92,23 @@ def main() -> None:
     gt = load_groundtruth(gt_path)
     store = BlobStore(settings.blob_root)
     row, clf = load_material_classifier(settings=settings)
-    names: dict[int, str] = {}
-    hits: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    hits: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
     with session_scope() as session:
-        names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
+        materials = session.execute(sa.select(m.Material)).scalars().all()
+        names = {mat.id: mat.name for mat in materials}
+        mat_labs = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
+        labs = material_lab_matrix(clf.materials, mat_labs)
+        data = training_data(session, store)
+        distances = region_color_distances(data.val, mat_labs, limit=COLOR_SIGMA_RENDERS)
+        sigma = fit_color_sigma(distances)
+        if sigma is None:
+            sys.exit("no validation renders with material colours: cannot fit the colour likelihood")
+        print(f"classifier {row.name} on {gt_path}")
+        print(f"colour sigma {sigma:.2f} CIELAB from {len(distances)} validation regions "
+              f"(median dE {np.median(distances):.1f})")
+        val = validation_renders(clf, data, labs, sigma)
+        _print("validation renders, exact material regions (material head alone)", val)
+
         truths = _exemplar_truths(session, gt, None)
         pairs = session.execute(
             sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
@@ -68,30 +133,34 @@ def main() -> None:
             if not items:
                 continue
             mat_probs, head_probs = clf.predict(image, [i[0] for i in items])
-            for k, (_, truth, network, true_sub, network_sub) in enumerate(items):
+            for k, (mask, truth, network, true_sub, network_sub) in enumerate(items):
                 hits["network argmax (substance only)"].append((float("nan"), float("nan"),
                                                                 float(network_sub == true_sub)))
-                variants = {"none": None, "network": network, "head": head_probs[k],
-                            "both": network * head_probs[k]}
-                for name, weights in variants.items():
-                    ranked = clf.top_k(mat_probs[k:k + 1], None if weights is None else weights[None], k=5,
-                                       weight_by_substance=weights is not None)[0]
+                lab = median_lab(image, mask)
+                colour = {f: color_likelihood(lab, labs, sigma * f)[None] for f in (0.5, 1.0, 2.0)}
+                uniform = np.full_like(mat_probs[k:k + 1], 1.0)
+                variants = {"none": (None, None), "network": (network, None), "head": (head_probs[k], None),
+                            "both": (network * head_probs[k], None),
+                            "network + colour (pipeline)": (network, colour[1.0]),
+                            "network + colour, sigma / 2": (network, colour[0.5]),
+                            "network + colour, 2 sigma": (network, colour[2.0]),
+                            "colour only": (None, colour[1.0] * uniform[:, 1:]),
+                            "sqrt(material head) x network x colour": (network, colour[1.0])}
+                for name, (weights, colours) in variants.items():
+                    probs = uniform if name == "colour only" else mat_probs[k:k + 1]
+                    if name.startswith("sqrt"):  # a tempered material head: the other evidence weighs more
+                        probs = np.sqrt(probs)
+                    ranked = clf.top_k(probs, None if weights is None else weights[None], k=5,
+                                       weight_by_substance=weights is not None, color_weights=colours)[0]
                     picked = [names[r.material_id] for r in ranked]
                     hits[name].append((float(picked[:1] == [truth]), float(truth in picked),
                                        float(ranked[0].substance == true_sub)))
-    result = {
-        name: {"material_top1": float(np.mean([h[0] for h in v])), "material_top5": float(np.mean([h[1] for h in v])),
-               "substance_accuracy": float(np.mean([h[2] for h in v])), "parts": len(v)}
-        for name, v in hits.items()
-    }
-    print(f"classifier {row.name} on {gt_path}")
-    print("| weighting | top-1 | top-5 | substance acc. | parts |\n|---|---:|---:|---:|---:|")
-    for name, r in result.items():
-        print(f"| {name} | {r['material_top1']:.3f} | {r['material_top5']:.3f} | {r['substance_accuracy']:.3f} "
-              f"| {r['parts']} |")
+    result = _summary(hits)
+    _print("exemplars, aligned parts (what `photoshape eval` scores)", result)
     out = Path(__file__).parent / "results" / "substance_weighting.json"
     out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({"groundtruth": str(gt_path), "classifier": row.name, "results": result}, indent=2))
+    out.write_text(json.dumps({"groundtruth": str(gt_path), "classifier": row.name, "color_sigma": sigma,
+                               "validation_renders": val, "results": result}, indent=2))
 
 
 if __name__ == "__main__":

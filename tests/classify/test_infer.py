@@ -90,3 +90,13 @@ def test_predict_averages_each_region_with_its_mirror_image() -> None:
     both_mat, both_sub = load_classifier(_checkpoint(), device="cpu").predict(image, masks)
     assert np.allclose(both_mat, 0.5 * (mat + mirrored_mat), atol=1e-5)
     assert np.allclose(both_sub, 0.5 * (sub + mirrored_sub), atol=1e-5)
+
+
+def test_top_k_multiplies_in_the_colour_likelihood() -> None:
+    classifier = load_classifier(_checkpoint(), device="cpu")
+    material = np.array([[0.1, 0.4, 0.35, 0.15]])  # background, 4, 9, 12
+    colours = np.array([[0.2, 1.0, 0.5]])  # the part's colour is that of material 9
+    ranked = classifier.top_k(material, None, k=3, weight_by_substance=False, color_weights=colours)[0]
+    assert [r.material_id for r in ranked] == [9, 4, 12]
+    assert ranked[0].score == pytest.approx(0.35) and ranked[1].score == pytest.approx(0.4 * 0.2)
+    assert ranked[0].probability == pytest.approx(0.35)

@@ -73,12 +73,16 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
         progress = {p.stage: p for p in stage_progress(session)}
         candidates = session.execute(sa.text("SELECT COUNT(DISTINCT pair_id) FROM photoshape_candidate "
                                              "WHERE method = 'classifier'")).scalar_one()
+        colour_ranked = session.execute(sa.text(
+            "SELECT COUNT(*) FROM assignment WHERE method = 'classifier' AND NOT unobserved "
+            "AND json_extract(params, '$.color_likelihood') IS NOT NULL")).scalar_one()
         photoshape_renders = session.execute(
             sa.select(sa.func.count()).select_from(m.Rendering).where(m.Rendering.kind == "photoshape")
         ).scalar_one()
     for stage in ("coarse-alignment", "fine-alignment", "substances", "inference"):
         assert progress[stage].done > 0 and progress[stage].pending == 0, stage
     assert candidates > 0 and photoshape_renders > 0
+    assert colour_ranked > 0  # observed parts ranked with the colour likelihood fit on validation renders
     assert (data_root / "gallery" / "index.html").is_file()
 
     # the material-added re-run: found in the database, fine-tuned, re-inferred, old rows kept

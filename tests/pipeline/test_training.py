@@ -154,6 +154,20 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
     ranked = payload["regions"][0]["materials"]
     assert len(ranked) == 2 and {r["name"] for r in ranked} <= set(TOY)
     assert ranked[0]["score"] >= ranked[1]["score"]
+    assert payload["color_sigma"] is None  # the materials have no colour yet: no colour likelihood
+
+    # with the materials' colours known, the colour likelihood (sigma fit on the val renders) joins in
+    # and, the region being drawn in its material's colour, puts that material first
+    with session_scope(db_url) as session:
+        for mid, (_, colour) in materials.items():
+            session.execute(sa.update(Material).where(Material.id == mid)
+                            .values(params={"albedo": [c / 255 for c in colour]}))
+    args = ["retrieve", str(tmp_path / "photo.png"), "--mask", str(tmp_path / "mask.png"), "--json"]
+    coloured = json.loads(runner.invoke(app, args).output)
+    assert 1.0 <= coloured["color_sigma"] < 20
+    assert coloured["regions"][0]["materials"][0]["material_id"] == int(id_map.max())
+    plain = json.loads(runner.invoke(app, [*args, "--no-color-prior"]).output)
+    assert plain["color_sigma"] is None
     table = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "-m", str(tmp_path / "mask.png")])
     assert table.exit_code == 0 and "substance" in table.output
     bad = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "-m", str(tmp_path / "empty.png")])

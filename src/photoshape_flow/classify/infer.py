@@ -134,13 +134,21 @@ class MaterialClassifier:
             return np.zeros((0, self.num_materials + 1), np.float32), np.zeros((0, len(SUBSTANCE_LABELS)), np.float32)
         return torch.cat(mats).numpy(), torch.cat(subs).numpy()
 
-    def scores(self, material_probs: np.ndarray, substance_probs: np.ndarray | None = None) -> np.ndarray:
-        """Ranking scores (K, |M|) of the materials (background dropped), substance-weighted if given."""
+    def scores(
+        self, material_probs: np.ndarray, substance_probs: np.ndarray | None = None,
+        color_weights: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Ranking scores (K, |M|) of the materials (background dropped).
+
+        Multiplied by the substance confidence when `substance_probs` (K, 6) is given, and by the
+        colour likelihood (`classify.color_prior`) when `color_weights` (K, |M|) is given.
+        """
         probs = np.asarray(material_probs)[:, 1:]
-        if substance_probs is None:
-            return probs
-        weights = np.asarray(substance_probs)[:, self._substance_index[1:].numpy()]
-        return probs * weights
+        if substance_probs is not None:
+            probs = probs * np.asarray(substance_probs)[:, self._substance_index[1:].numpy()]
+        if color_weights is not None:
+            probs = probs * np.asarray(color_weights)
+        return probs
 
     def top_k(
         self,
@@ -148,9 +156,10 @@ class MaterialClassifier:
         substance_probs: np.ndarray | None = None,
         k: int = 10,
         weight_by_substance: bool = True,
+        color_weights: np.ndarray | None = None,
     ) -> list[list[Ranked]]:
         """The k best materials per region, best first."""
-        scores = self.scores(material_probs, substance_probs if weight_by_substance else None)
+        scores = self.scores(material_probs, substance_probs if weight_by_substance else None, color_weights)
         probs = np.asarray(material_probs)[:, 1:]
         results = []
         for row in range(scores.shape[0]):

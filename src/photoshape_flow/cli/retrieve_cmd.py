@@ -26,6 +26,11 @@ def retrieve(
         True, "--substance-weighting/--no-substance-weighting",
         help="Weight material probabilities by the predicted substance's probability (paper, 5.2 Inference).",
     ),
+    color_prior: bool = typer.Option(
+        True, "--color-prior/--no-color-prior",
+        help="Also weight by the likelihood of the region's median colour under each material, as the "
+        "inference stage does (sigma fit on the validation renders; skipped when there are none).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of tables."),
 ) -> None:
     """Rank materials for masked regions of a photo with the trained material classifier."""
@@ -34,10 +39,14 @@ def retrieve(
     import numpy as np
     import sqlalchemy as sa
 
+    from photoshape_flow.classify.assignment import median_lab
+    from photoshape_flow.classify.color_prior import color_likelihood
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.models import Material
     from photoshape_flow.db.session import session_scope
+    from photoshape_flow.pipeline.inference import color_prior_for
     from photoshape_flow.pipeline.training import load_material_classifier
+    from photoshape_flow.store import BlobStore
 
     if crop not in ("image", "mask"):
         fail(f"--crop must be 'image' or 'mask', got {crop!r}")
@@ -61,7 +70,15 @@ def retrieve(
         row, model = load_material_classifier(classifier, settings)
     except (LookupError, ValueError) as exc:
         fail(str(exc))
-    ranked = model.rank(photo, masks, k=top, weight_by_substance=substance_weighting, crop=crop)  # type: ignore[arg-type]
+    material_probs, substance_probs = model.predict(photo, masks, crop=crop)  # type: ignore[arg-type]
+    colours = None
+    with session_scope(settings.resolved_database_url) as session:
+        prior = color_prior_for(session, BlobStore(settings.blob_root), model.materials) if color_prior else None
+    if prior is not None:
+        labs, sigma = prior
+        colours = np.stack([color_likelihood(median_lab(photo, region), labs, sigma) for region in masks])
+    ranked = model.top_k(material_probs, substance_probs, k=top, weight_by_substance=substance_weighting,
+                         color_weights=colours)
     ids = sorted({r.material_id for regions in ranked for r in regions})
     with session_scope(settings.resolved_database_url) as session:
         rows = session.execute(sa.select(Material.id, Material.name).where(Material.id.in_(ids)))
@@ -70,6 +87,7 @@ def retrieve(
     if as_json:
         payload = {
             "classifier": {"id": row.id, "name": row.name},
+            "color_sigma": prior[1] if prior is not None else None,
             "regions": [
                 {"mask": str(path), "materials": [
                     {"rank": i + 1, "material_id": r.material_id, "name": names.get(r.material_id),
@@ -81,7 +99,8 @@ def retrieve(
         }
         console.print_json(json.dumps(payload))
         return
-    console.print(f"classifier {row.id} ({row.name}, {row.architecture})", highlight=False)
+    colour_note = f", colour likelihood sigma {prior[1]:.1f}" if prior is not None else ""
+    console.print(f"classifier {row.id} ({row.name}, {row.architecture}){colour_note}", highlight=False)
     for path, regions in zip(mask, ranked, strict=True):
         table = Table(title=f"{path.name}")
         for column in ("rank", "material", "substance", "score", "p(material)"):

@@ -35,6 +35,12 @@ from photoshape_flow.classify.assignment import (
     random_of_substance,
     substance_vector,
 )
+from photoshape_flow.classify.color_prior import (
+    color_likelihood,
+    fit_color_sigma,
+    material_lab_matrix,
+    region_color_distances,
+)
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
@@ -47,7 +53,8 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-CODE_VERSION = "inference-2"  # 2: flip-averaged classifier probabilities
+CODE_VERSION = "inference-3"  # 2: flip-averaged classifier probabilities; 3: colour likelihood
+COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
 
@@ -66,6 +73,7 @@ class _PartInput:
     part: m.Part
     mask: np.ndarray | None  # None: unobserved
     substance: PartSubstanceView
+    color: dict[int, float] | None = None  # material id -> colour likelihood, when the ranking used it
 
 
 @dataclass
@@ -119,7 +127,7 @@ class _Context:
     """What one inference run needs once: materials, their colours, the classifier."""
 
     def __init__(self, session: Session, store: BlobStore, method: str, classifier: m.Classifier | None,
-                 settings: Settings, top_k: int):
+                 settings: Settings, top_k: int, color_prior: bool = True):
         self.store = store
         self.method = method
         self.top_k = top_k
@@ -143,11 +151,17 @@ class _Context:
                 torch.set_num_threads(settings.torch_threads)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
         self.material_labs: dict[int, np.ndarray] = {}
-        if method == "color-match":
+        if method == "color-match" or (method == "classifier" and color_prior):
             for mat in mats:
                 lab = material_lab(mat, store)
                 if lab is not None:
                     self.material_labs[mat.id] = lab
+        self.color_sigma: float | None = None
+        self.model_labs: np.ndarray | None = None
+        if method == "classifier" and color_prior and self.material_labs:
+            assert self.model is not None
+            self.color_sigma = fit_classifier_color_sigma(session, store, self.material_labs)
+            self.model_labs = material_lab_matrix(self.model.materials, self.material_labs)
 
     @property
     def params(self) -> dict[str, Any]:
@@ -157,7 +171,31 @@ class _Context:
             "top_k": self.top_k,
             "materials": [mid for mid, _ in self.materials],
             "code": CODE_VERSION,
+            "color_sigma": None if self.color_sigma is None else round(self.color_sigma, 4),
         }
+
+
+def fit_classifier_color_sigma(
+    session: Session, store: BlobStore, material_labs: dict[int, np.ndarray]
+) -> float | None:
+    """sigma of the colour likelihood from the classifier's validation renders (None when there are none)."""
+    from photoshape_flow.pipeline.training import training_data
+
+    data = training_data(session, store)
+    sigma = fit_color_sigma(region_color_distances(data.val, material_labs, limit=COLOR_SIGMA_RENDERS))
+    log.info("colour likelihood sigma %s (CIELAB, fit on %d validation renders)",
+             f"{sigma:.2f}" if sigma else "none", min(len(data.val), COLOR_SIGMA_RENDERS))
+    return sigma
+
+
+def color_prior_for(
+    session: Session, store: BlobStore, materials: Sequence[int]
+) -> tuple[np.ndarray, float] | None:
+    """(material colours in `materials` order, sigma) for the colour likelihood, None without data."""
+    rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
+    labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
+    sigma = fit_classifier_color_sigma(session, store, labs) if labs else None
+    return (material_lab_matrix(materials, labs), sigma) if sigma is not None else None
 
 
 def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
@@ -218,13 +256,18 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
         return color_match(lab, ctx.material_labs, ctx.material_substance, ctx.top_k,
                            substance=None if item.mask is not None else sub.substance)
     # classifier: material probabilities x substance confidence of the substance network
+    # x the colour likelihood of the part's median colour (observed parts only)
+    assert ctx.model is not None
     mat_probs, _ = batch[item.part.id]
+    colors = None
     if item.mask is not None:
         weights = substance_vector(sub.probs)
+        if ctx.color_sigma is not None and ctx.model_labs is not None:
+            colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)[None]
+            item.color = dict(zip(ctx.model.materials, colors[0].tolist(), strict=True))
     else:  # unobserved: only the prior substance's materials
         weights = one_substance(sub.substance) if sub.substance else substance_vector(None)
-    assert ctx.model is not None
-    ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials))[0]
+    ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials), color_weights=colors)[0]
     enabled = ctx.material_substance
     kept = [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked if r.material_id in enabled]
     return kept[: ctx.top_k]
@@ -289,7 +332,8 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
                     unobserved=item.mask is None,
                     params={"part_substance": item.substance.substance,
                             "substance_confidence": item.substance.probs.get(item.substance.substance or "", None),
-                            "uv": IDENTITY_UV},
+                            "uv": IDENTITY_UV,
+                            **({"color_likelihood": round(item.color[r.material_id], 6)} if item.color else {})},
                     params_hash=params_hash,
                 ))
     session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair.id,
@@ -306,8 +350,13 @@ def run_inference(
     top_k: int = 5,
     batch_size: int = 16,
     settings: Settings | None = None,
+    color_prior: bool = True,
 ) -> InferenceSummary:
-    """Write ranked assignments for every pending pair with one method; resumable and idempotent."""
+    """Write ranked assignments for every pending pair with one method; resumable and idempotent.
+
+    `color_prior` (classifier only) multiplies the ranking by the colour likelihood of
+    `classify.color_prior`; off, the ranking is the paper's (probability x substance confidence).
+    """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     settings = settings or get_settings()
@@ -315,7 +364,7 @@ def run_inference(
     url = settings.resolved_database_url
     with session_scope(url) as session:
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
-        ctx = _Context(session, store, method, classifier, settings, top_k)
+        ctx = _Context(session, store, method, classifier, settings, top_k, color_prior)
         method_key = f"classifier:{classifier.id}" if classifier is not None else method
         params_hash = _hash(ctx.params)
         todo = pending_pairs(session, method_key, params_hash, pair_ids)
