@@ -146,6 +146,16 @@ def main() -> None:
                             "network + colour, 2 sigma": (network, colour[2.0]),
                             "colour only": (None, colour[1.0] * uniform[:, 1:]),
                             "sqrt(material head) x network x colour": (network, colour[1.0])}
+                # marginal-first: the substance with the most posterior mass, then its best material
+                scores = clf.scores(mat_probs[k:k + 1], network[None], colour[1.0])[0]
+                subs_of = np.array(clf.material_substances)
+                mass = {s: scores[subs_of == s].sum() for s in set(clf.material_substances)}
+                best_sub = max(mass, key=mass.get)
+                order = list(np.argsort(-scores, kind="stable"))
+                first = next(i for i in order if subs_of[i] == best_sub)
+                picked = [names[clf.materials[i]] for i in [first, *[i for i in order if i != first]][:5]]
+                hits["network + colour, substance by marginal"].append(
+                    (float(picked[0] == truth), float(truth in picked), float(best_sub == true_sub)))
                 for name, (weights, colours) in variants.items():
                     probs = uniform if name == "colour only" else mat_probs[k:k + 1]
                     if name.startswith("sqrt"):  # a tempered material head: the other evidence weighs more
