@@ -5,7 +5,8 @@ the substance network's per-part probabilities, and writes the ranked results as
 
 - classifier: material probabilities weighted by the substance confidence (section 5.2.4) — the
   substance confidence comes from the substance segmentation network, which is independent of the
-  classifier, so the two sources of evidence combine.
+  classifier, so the two sources of evidence combine — and, beyond the paper, by the colour
+  likelihood of `classify.color_prior` (the colour-matching distance made a likelihood).
 - no-classifier: a random material of the predicted substance (seeded by the pair and part, so a
   re-run draws the same), "akin to our training data generation process".
 - color-match: the median colour of the exemplar's part against the median colour of each material's

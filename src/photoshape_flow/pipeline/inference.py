@@ -5,8 +5,9 @@ the exemplar with its mask; parts with no pixels are *unobserved*: their substan
 (the substances the same part showed in the shape's other pairs, else a part-name prior), their
 material from the method restricted to that substance, and their rows are marked `unobserved`.
 
-Methods (`assignment.method`): `classifier` (ours; rows keyed `classifier:<id>` so a new classifier
-adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
+Methods (`assignment.method`): `classifier` (ours: material probability x substance confidence x
+colour likelihood, the last fit on the validation renders; rows keyed `classifier:<id>` so a new
+classifier adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
 path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
 claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
 """
