@@ -152,17 +152,18 @@ class _Context:
                 torch.set_num_threads(settings.torch_threads)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
         self.material_labs: dict[int, np.ndarray] = {}
-        if method == "color-match" or (method == "classifier" and color_prior):
+        if method == "color-match":
             for mat in mats:
                 lab = material_lab(mat, store)
                 if lab is not None:
                     self.material_labs[mat.id] = lab
         self.color_sigma: float | None = None
         self.model_labs: np.ndarray | None = None
-        if method == "classifier" and color_prior and self.material_labs:
+        if method == "classifier" and color_prior:
             assert self.model is not None
-            self.color_sigma = fit_classifier_color_sigma(session, store, self.material_labs)
-            self.model_labs = material_lab_matrix(self.model.materials, self.material_labs)
+            prior = color_prior_for(session, store, self.model.materials)
+            if prior is not None:
+                self.model_labs, self.color_sigma = prior
 
     @property
     def params(self) -> dict[str, Any]:
