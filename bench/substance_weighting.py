@@ -7,8 +7,11 @@ material top-1/top-5 against the ground truth for
   - head:             x the classifier's own substance head,
   - both:             x the product of the two,
   - network + colour: x the network's confidence x the colour likelihood of `classify.color_prior`
-                      (the pipeline's default), with sigma fit on the validation renders, and at
+                      (run 4's ranking), with sigma fit on the validation renders, and at
                       sigma / 2 and 2 sigma to show how sensitive it is,
+  - calibrated:       the network's confidence tempered by its part-level temperature
+                      (`classify.substance_calibration`, fit on the bootstrap validation renders),
+                      alone and x colour (the pipeline's default since inference-4),
   - colour only:      the colour likelihood alone (the colour-matching baseline's ranking),
   - sqrt(material head) x network x colour: the material head tempered (T = 2), a diagnostic of
                       whether the material head is over-confident against the other two,
@@ -38,12 +41,14 @@ from photoshape_flow.classify.color_prior import (
     region_color_distances,
 )
 from photoshape_flow.classify.dataset import load_label_map, load_rgb
+from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
 from photoshape_flow.pipeline.evaluate import _exemplar_truths, _majority, _part_map, truth_labels
 from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
+from photoshape_flow.pipeline.substances import substance_temperature
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
 
@@ -109,6 +114,10 @@ def main() -> None:
         val = validation_renders(clf, data, labs, sigma)
         _print("validation renders, exact material regions (material head alone)", val)
 
+        networks = session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars().all()
+        session.commit()
+        temperatures = {n: substance_temperature(settings, n) for n in networks if n is not None}
+        print(f"substance network part temperatures {temperatures}")
         truths = _exemplar_truths(session, gt, None)
         pairs = session.execute(
             sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
@@ -128,12 +137,14 @@ def main() -> None:
                 winner = _majority(labels, mask)
                 if winner is None or mask.sum() < 16 or part.id not in subs or not subs[part.id].observed:
                     continue
-                items.append((mask, mats[winner - 1], substance_vector(subs[part.id].probs),
-                              true_subs[winner - 1], subs[part.id].substance))
+                ps = subs[part.id]
+                items.append((mask, mats[winner - 1], substance_vector(ps.probs),
+                              true_subs[winner - 1], ps.substance,
+                              substance_vector(temper(ps.probs, temperatures.get(ps.classifier_id)))))
             if not items:
                 continue
             mat_probs, head_probs = clf.predict(image, [i[0] for i in items])
-            for k, (mask, truth, network, true_sub, network_sub) in enumerate(items):
+            for k, (mask, truth, network, true_sub, network_sub, calibrated) in enumerate(items):
                 hits["network argmax (substance only)"].append((float("nan"), float("nan"),
                                                                 float(network_sub == true_sub)))
                 lab = median_lab(image, mask)
@@ -141,7 +152,9 @@ def main() -> None:
                 uniform = np.full_like(mat_probs[k:k + 1], 1.0)
                 variants = {"none": (None, None), "network": (network, None), "head": (head_probs[k], None),
                             "both": (network * head_probs[k], None),
-                            "network + colour (pipeline)": (network, colour[1.0]),
+                            "network + colour (run 4)": (network, colour[1.0]),
+                            "calibrated network": (calibrated, None),
+                            "calibrated network + colour (pipeline)": (calibrated, colour[1.0]),
                             "network + colour, sigma / 2": (network, colour[0.5]),
                             "network + colour, 2 sigma": (network, colour[2.0]),
                             "colour only": (None, colour[1.0] * uniform[:, 1:]),
@@ -170,6 +183,7 @@ def main() -> None:
     out = Path(__file__).parent / "results" / "substance_weighting.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"groundtruth": str(gt_path), "classifier": row.name, "color_sigma": sigma,
+                               "substance_temperatures": temperatures,
                                "validation_renders": val, "results": result}, indent=2))
 
 

@@ -100,3 +100,17 @@ def test_top_k_multiplies_in_the_colour_likelihood() -> None:
     assert [r.material_id for r in ranked] == [9, 4, 12]
     assert ranked[0].score == pytest.approx(0.35) and ranked[1].score == pytest.approx(0.4 * 0.2)
     assert ranked[0].probability == pytest.approx(0.35)
+
+
+def test_a_sharper_calibrated_substance_confidence_outweighs_the_material_head() -> None:
+    from photoshape_flow.classify.assignment import substance_vector
+    from photoshape_flow.classify.substance_calibration import temper
+
+    classifier = load_classifier(_checkpoint(), device="cpu")
+    material = np.array([[0.1, 0.3, 0.5, 0.1]])  # background, 4 (wood), 9 (fabric), 12 (wood)
+    network = {"wood": 0.55, "fabric": 0.45}  # a mean of pixel opinions: right, but flat
+    raw = classifier.top_k(material, substance_vector(network)[None], k=3)[0]
+    assert raw[0].material_id == 9  # the head's fabric overrules the flat wood confidence
+    calibrated = substance_vector(temper(network, 0.25))[None]  # validation parts say: trust it more
+    sharp = classifier.top_k(material, calibrated, k=3)[0]
+    assert sharp[0].material_id == 4 and sharp[0].substance == "wood"

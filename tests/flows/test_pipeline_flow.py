@@ -76,6 +76,7 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
         colour_ranked = session.execute(sa.text(
             "SELECT COUNT(*) FROM assignment WHERE method = 'classifier' AND NOT unobserved "
             "AND json_extract(params, '$.color_likelihood') IS NOT NULL")).scalar_one()
+        network = session.execute(sa.select(m.Classifier).where(m.Classifier.kind == "substance")).scalar_one()
         photoshape_renders = session.execute(
             sa.select(sa.func.count()).select_from(m.Rendering).where(m.Rendering.kind == "photoshape")
         ).scalar_one()
@@ -83,6 +84,8 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
         assert progress[stage].done > 0 and progress[stage].pending == 0, stage
     assert candidates > 0 and photoshape_renders > 0
     assert colour_ranked > 0  # observed parts ranked with the colour likelihood fit on validation renders
+    # the substance confidence's part-level temperature, fit on the network's validation renders
+    assert network.metrics["part_temperature_parts"] >= 0 and "part_temperature" in network.metrics
     assert (data_root / "gallery" / "index.html").is_file()
 
     # the material-added re-run: found in the database, fine-tuned, re-inferred, old rows kept

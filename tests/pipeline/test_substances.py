@@ -120,3 +120,26 @@ def test_substances_stage_end_to_end_and_idempotent(
         (classifier_after,) = session.execute(sa.select(m.Classifier)).scalars()
     assert after == {r.id: r.updated_at for r in rows}
     assert classifier_after.updated_at == classifier.updated_at
+
+    # the part-level temperature: fit on held-out renders, cached, refit when they change
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.pipeline.substances import substance_temperature
+
+    settings = get_settings()
+    first = substance_temperature(settings, classifier.id)
+    with session_scope(db_url) as session:
+        fitted = session.get(m.Classifier, classifier.id)
+        metrics, stamp = dict(fitted.metrics), fitted.updated_at
+    assert metrics["part_temperature"] == first  # None here: fewer parts than a fit needs
+    assert metrics["part_temperature_parts"] < 20 and metrics["part_temperature_key"]
+    assert substance_temperature(settings, classifier.id) == first
+    with session_scope(db_url) as session:
+        assert session.get(m.Classifier, classifier.id).updated_at == stamp  # cached: nothing written
+        held_out = session.execute(sa.select(m.Rendering).where(m.Rendering.kind == "bootstrap",
+                                                                m.Rendering.split != "val")).scalars().first()
+        held_out.split = "val"
+    substance_temperature(settings, classifier.id)
+    with session_scope(db_url) as session:
+        refit = session.get(m.Classifier, classifier.id).metrics
+    assert refit["part_temperature_renders"] == metrics["part_temperature_renders"] + 1
+    assert refit["part_temperature_key"] != metrics["part_temperature_key"]

@@ -5,8 +5,8 @@ the exemplar with its mask; parts with no pixels are *unobserved*: their substan
 (the substances the same part showed in the shape's other pairs, else a part-name prior), their
 material from the method restricted to that substance, and their rows are marked `unobserved`.
 
-Methods (`assignment.method`): `classifier` (ours: material probability x substance confidence x
-colour likelihood, the last fit on the validation renders; rows keyed `classifier:<id>` so a new
+Methods (`assignment.method`): `classifier` (ours: material probability x calibrated substance
+confidence x colour likelihood, both fit on validation renders; rows keyed `classifier:<id>` so a new
 classifier adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
 path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
 claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
@@ -42,6 +42,7 @@ from photoshape_flow.classify.color_prior import (
     material_lab_matrix,
     region_color_distances,
 )
+from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
@@ -54,7 +55,7 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-CODE_VERSION = "inference-3"  # 2: flip-averaged classifier probabilities; 3: colour likelihood
+CODE_VERSION = "inference-4"  # 2: flip-averaged probabilities; 3: colour likelihood; 4: calibrated substances
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
@@ -82,6 +83,7 @@ class PartSubstanceView:
     substance: str | None
     probs: dict[str, float]
     observed: bool
+    network: int | None = None  # the substance network (classifier id) behind `probs`, when one is
 
 
 def resolve_classifier(session: Session, classifier_id: int | None = None) -> m.Classifier | None:
@@ -128,7 +130,7 @@ class _Context:
     """What one inference run needs once: materials, their colours, the classifier."""
 
     def __init__(self, session: Session, store: BlobStore, method: str, classifier: m.Classifier | None,
-                 settings: Settings, top_k: int, color_prior: bool = True):
+                 settings: Settings, top_k: int, color_prior: bool = True, calibrate_substances: bool = True):
         self.store = store
         self.method = method
         self.top_k = top_k
@@ -164,6 +166,17 @@ class _Context:
             prior = color_prior_for(session, store, self.model.materials)
             if prior is not None:
                 self.model_labs, self.color_sigma = prior
+        # part-level temperature of each substance network whose rows weight the ranking
+        self.substance_temperatures: dict[int, float | None] = {}
+        if method == "classifier" and calibrate_substances:
+            from photoshape_flow.pipeline.substances import substance_temperature
+
+            networks = session.execute(
+                sa.select(m.PartSubstance.classifier_id).where(m.PartSubstance.classifier_id.is_not(None)).distinct()
+            ).scalars().all()
+            session.commit()  # substance_temperature may cache its fit in its own session
+            for network in sorted(networks):
+                self.substance_temperatures[int(network)] = substance_temperature(settings, int(network))
 
     @property
     def params(self) -> dict[str, Any]:
@@ -174,7 +187,14 @@ class _Context:
             "materials": [mid for mid, _ in self.materials],
             "code": CODE_VERSION,
             "color_sigma": None if self.color_sigma is None else round(self.color_sigma, 4),
+            "substance_temperatures": {str(k): None if v is None else round(v, 4)
+                                       for k, v in sorted(self.substance_temperatures.items())},
         }
+
+    def substance_weights(self, view: PartSubstanceView) -> np.ndarray:
+        """The part's substance confidence as ranking weights, calibrated for its network."""
+        temperature = self.substance_temperatures.get(view.network) if view.network is not None else None
+        return substance_vector(temper(view.probs, temperature) if temperature is not None else view.probs)
 
 
 def fit_classifier_color_sigma(
@@ -263,7 +283,7 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
     mat_probs, _ = batch[item.part.id]
     colors = None
     if item.mask is not None:
-        weights = substance_vector(sub.probs)
+        weights = ctx.substance_weights(sub)
         if ctx.color_sigma is not None and ctx.model_labs is not None:
             colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)[None]
             item.color = dict(zip(ctx.model.materials, colors[0].tolist(), strict=True))
@@ -309,7 +329,7 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
             ps = substances.get(part.id)
             observed = int(mask.sum()) >= min_pixels and (ps is None or ps.observed)
             if observed and ps is not None and ps.substance:
-                view = PartSubstanceView(ps.substance, dict(ps.probs or {}), True)
+                view = PartSubstanceView(ps.substance, dict(ps.probs or {}), True, ps.classifier_id)
             elif observed:
                 # aligned but no substance row (substances stage not run): fall back to the prior
                 sub, prior = _prior_substance(session, part, pair.id, ctx.available_substances)
@@ -353,11 +373,14 @@ def run_inference(
     batch_size: int = 16,
     settings: Settings | None = None,
     color_prior: bool = True,
+    calibrate_substances: bool = True,
 ) -> InferenceSummary:
     """Write ranked assignments for every pending pair with one method; resumable and idempotent.
 
     `color_prior` (classifier only) multiplies the ranking by the colour likelihood of
-    `classify.color_prior`; off, the ranking is the paper's (probability x substance confidence).
+    `classify.color_prior`; `calibrate_substances` tempers the substance confidence with its
+    network's part-level temperature (`classify.substance_calibration`). Both off, the ranking is
+    the paper's (probability x substance confidence).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
@@ -366,7 +389,7 @@ def run_inference(
     url = settings.resolved_database_url
     with session_scope(url) as session:
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
-        ctx = _Context(session, store, method, classifier, settings, top_k, color_prior)
+        ctx = _Context(session, store, method, classifier, settings, top_k, color_prior, calibrate_substances)
         method_key = f"classifier:{classifier.id}" if classifier is not None else method
         params_hash = _hash(ctx.params)
         todo = pending_pairs(session, method_key, params_hash, pair_ids)

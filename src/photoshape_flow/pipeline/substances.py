@@ -40,7 +40,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS
+from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS, SUBSTANCES
 
 log = logging.getLogger(__name__)
 
@@ -179,6 +179,97 @@ def train_or_resume(
         raise
     info.update(epochs_run=result.epochs_run, metrics=result.checkpoint.get("metrics", {}))
     return classifier_id, result.model, info
+
+
+# -- calibration --------------------------------------------------------------------------------------
+
+CALIBRATION_RENDERS = 600  # renders read to fit the part-level temperature (evenly spread over those held out)
+CALIBRATION_KINDS: tuple[str, ...] = ("training",)  # rounds the substance network never trains on
+
+
+def calibration_renders(session: sa.orm.Session, limit: int = CALIBRATION_RENDERS) -> list[tuple[str, dict]]:
+    """(key, blobs) of renders the substance network never saw: bootstrap validation + later rounds.
+
+    At most `limit`, evenly spread over the sorted keys (so every round and shape is represented and
+    the choice is stable).
+    """
+    rows = session.execute(
+        sa.select(m.Rendering.kind, m.Rendering.key, m.Rendering.blobs)
+        .where(m.Rendering.status == STATUS_OK, ~m.Rendering.exclude,
+               sa.or_(sa.and_(m.Rendering.kind == "bootstrap", m.Rendering.split == "val"),
+                      m.Rendering.kind.in_(CALIBRATION_KINDS)))
+        .order_by(m.Rendering.kind, m.Rendering.key)
+    ).all()
+    if len(rows) > limit:
+        rows = [rows[i] for i in np.linspace(0, len(rows) - 1, limit).round().astype(int)]
+    return [(f"{kind}/{key}", blobs or {}) for kind, key, blobs in rows]
+
+
+def substance_temperature(settings: Settings, classifier_id: int, model: Any = None) -> float | None:
+    """Part-level temperature of a substance network (`classify.substance_calibration`).
+
+    Fit on renders the network never trained on (`calibration_renders`: its validation bootstrap
+    renders and the classifier's training renders, which carry exact part and substance labels)
+    and cached in its row's `metrics` (`part_temperature`, the parts used, part accuracy and NLL
+    before and after, and a key of the renders used): refit only when those renders change, and
+    a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
+    """
+    from photoshape_flow.classify.substance_calibration import fit_temperature, part_calibration_set, temper
+    from photoshape_flow.classify.substance_train import (
+        checkpoint_from_bytes,
+        load_model,
+        predict_substances,
+        resolve_device,
+    )
+
+    url = settings.resolved_database_url
+    store = BlobStore(settings.blob_root)
+    with session_scope(url) as session:
+        row = session.get(m.Classifier, classifier_id)
+        if row is None or row.kind != "substance" or not row.checkpoint_blob:
+            return None
+        metrics = dict(row.metrics or {})
+        renders = calibration_renders(session)
+        cache_key = _hash([row.checkpoint_blob, [key for key, _ in renders]])
+        if metrics.get("part_temperature_key") == cache_key:
+            value = metrics.get("part_temperature")
+            return None if value is None else float(value)
+        size = int((row.config or {}).get("size") or 128)
+        checkpoint_ref = row.checkpoint_blob
+    if model is None:
+        model = load_model(checkpoint_from_bytes(store.read_bytes(checkpoint_ref)), resolve_device(settings.device))
+    predictions = []
+    for key, blobs in renders:
+        try:
+            image = store.load_image(blobs["beauty"])
+            part_ids = _load_label_map(store, blobs["part_ids"]).astype(np.int64)
+            substance_ids = _load_label_map(store, blobs["substance_ids"]).astype(np.int64)
+            probs = predict_substances(model, image[..., :3], size)
+            if probs.shape[1:] != part_ids.shape:
+                probs = _resize_probs(probs, part_ids.shape)
+        except (KeyError, OSError, ValueError) as exc:
+            log.warning("rendering %s: %s; not used for calibration", key, exc)
+            continue
+        predictions.append((probs, part_ids, substance_ids))
+    calibration = part_calibration_set(predictions)
+    temperature = fit_temperature(calibration.probs, calibration.truth)
+    info: dict[str, Any] = {"part_temperature": temperature, "part_temperature_parts": len(calibration),
+                            "part_temperature_renders": len(predictions), "part_temperature_key": cache_key}
+    if len(calibration):
+        truth, raw = calibration.truth, calibration.probs
+        tempered = raw if temperature is None else np.array(
+            [[temper(dict(zip(SUBSTANCES, r, strict=True)), temperature)[s] for s in SUBSTANCES] for r in raw])
+        rows = np.arange(len(truth))
+        info["part_accuracy"] = float((raw.argmax(axis=1) == truth).mean())
+        info["part_nll"] = float(-np.log(np.maximum(raw[rows, truth], 1e-6)).mean())
+        info["part_nll_tempered"] = float(-np.log(np.maximum(tempered[rows, truth], 1e-6)).mean())
+    with session_scope(url) as session:
+        row = session.get(m.Classifier, classifier_id)
+        if row is not None and row.checkpoint_blob == checkpoint_ref:
+            row.metrics = {**(row.metrics or {}), **info}
+    log.info("substance network %s: part temperature %s from %d parts of %d held-out renders", classifier_id,
+             "none" if temperature is None else f"{temperature:.3f}", len(calibration), len(predictions))
+    return temperature
 
 
 # -- part substances ----------------------------------------------------------------------------------
