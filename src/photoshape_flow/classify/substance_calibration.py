@@ -4,18 +4,19 @@ Why: inference multiplies the classifier's material probabilities by the substan
 confidence for each material's substance, and (by default) by a colour likelihood: a product of
 experts. A product only weighs its experts right when each is calibrated, and the part-level
 substance confidence is not: it is the *mean* over the part's pixels of per-pixel probabilities
-(`classify.substance_parts`), an average of noisy opinions, which is far less sure of itself than
-the majority vote of those pixels is right. Too flat, the network's word is overruled by the other
-experts; too sharp, it silences them.
+(`classify.substance_parts`), an average of noisy opinions whose spread says little about how often
+the part-level answer is right (on the medium demo it is too flat). Too flat, the network's word is
+overruled by the other experts; too sharp, it silences them.
 
 The fix is temperature scaling (Guo et al. 2017) at the part level,
 
     p_T(s) = p(s)^(1/T) / sum_s' p(s')^(1/T),
 
-with the one parameter T fit by maximum likelihood of the true part substances of the substance
-network's *validation* renders (held-out shapes and envmaps, exact per-pixel part and substance
-labels): never on exemplars. T < 1 sharpens, T > 1 flattens; T does not change the network's
-argmax, so the substance the no-classifier baseline and `part_substance` report is unchanged.
+with the one parameter T fit by maximum likelihood of the true part substances of *validation*
+renders (shapes and envmaps the network never trained on, exact per-pixel part and substance
+labels; `pipeline.substances.substance_temperature`): never on exemplars. T < 1 sharpens, T > 1
+flattens; T does not change the network's argmax, so the substance the no-classifier baseline and
+`part_substance` report is unchanged.
 """
 
 from __future__ import annotations

@@ -184,20 +184,21 @@ def train_or_resume(
 # -- calibration --------------------------------------------------------------------------------------
 
 CALIBRATION_RENDERS = 600  # renders read to fit the part-level temperature (evenly spread over those held out)
-CALIBRATION_KINDS: tuple[str, ...] = ("training",)  # rounds the substance network never trains on
+CALIBRATION_KINDS: tuple[str, ...] = ("bootstrap", "training")  # rounds whose validation renders calibrate
 
 
 def calibration_renders(session: sa.orm.Session, limit: int = CALIBRATION_RENDERS) -> list[tuple[str, dict]]:
-    """(key, blobs) of renders the substance network never saw: bootstrap validation + later rounds.
+    """(key, blobs) of validation renders of every round: shapes and envmaps the network never saw.
 
-    At most `limit`, evenly spread over the sorted keys (so every round and shape is represented and
-    the choice is stable).
+    The split is by shape and envmap and the same in every round, so the later rounds' validation
+    renders are as unseen as the bootstrap's (their training renders are not: they show the shapes
+    the network trained on, and would make it look better calibrated than it is on new shapes).
+    At most `limit`, evenly spread over the sorted keys (every round represented, the choice stable).
     """
     rows = session.execute(
         sa.select(m.Rendering.kind, m.Rendering.key, m.Rendering.blobs)
-        .where(m.Rendering.status == STATUS_OK, ~m.Rendering.exclude,
-               sa.or_(sa.and_(m.Rendering.kind == "bootstrap", m.Rendering.split == "val"),
-                      m.Rendering.kind.in_(CALIBRATION_KINDS)))
+        .where(m.Rendering.status == STATUS_OK, ~m.Rendering.exclude, m.Rendering.split == "val",
+               m.Rendering.kind.in_(CALIBRATION_KINDS))
         .order_by(m.Rendering.kind, m.Rendering.key)
     ).all()
     if len(rows) > limit:
@@ -208,8 +209,8 @@ def calibration_renders(session: sa.orm.Session, limit: int = CALIBRATION_RENDER
 def substance_temperature(settings: Settings, classifier_id: int, model: Any = None) -> float | None:
     """Part-level temperature of a substance network (`classify.substance_calibration`).
 
-    Fit on renders the network never trained on (`calibration_renders`: its validation bootstrap
-    renders and the classifier's training renders, which carry exact part and substance labels)
+    Fit on renders of shapes and envmaps the network never trained on (`calibration_renders`: the
+    validation renders of the bootstrap and training rounds, with exact part and substance labels)
     and cached in its row's `metrics` (`part_temperature`, the parts used, part accuracy and NLL
     before and after, and a key of the renders used): refit only when those renders change, and
     a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
