@@ -166,6 +166,18 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
     coloured = json.loads(runner.invoke(app, args).output)
     assert 1.0 <= coloured["color_sigma"] < 20
     assert coloured["regions"][0]["materials"][0]["material_id"] == int(id_map.max())
+    # the fitted sigma is cached on the classifier row, keyed by the renders and material colours
+    with session_scope(db_url) as session:
+        cached = dict(session.get(Classifier, classifier_id).metrics)
+    assert cached["color_sigma"] == pytest.approx(coloured["color_sigma"])
+    assert json.loads(runner.invoke(app, args).output)["color_sigma"] == coloured["color_sigma"]
+    with session_scope(db_url) as session:
+        assert session.get(Classifier, classifier_id).metrics["color_sigma_key"] == cached["color_sigma_key"]
+        first = min(materials)
+        session.execute(sa.update(Material).where(Material.id == first).values(params={"albedo": [0.9, 0.9, 0.1]}))
+    runner.invoke(app, args)
+    with session_scope(db_url) as session:  # a material's colour changed: refit under a new key
+        assert session.get(Classifier, classifier_id).metrics["color_sigma_key"] != cached["color_sigma_key"]
     plain = json.loads(runner.invoke(app, [*args, "--no-color-prior"]).output)
     assert plain["color_sigma"] is None
     table = runner.invoke(app, ["retrieve", str(tmp_path / "photo.png"), "-m", str(tmp_path / "mask.png")])

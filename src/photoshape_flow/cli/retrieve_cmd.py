@@ -42,7 +42,7 @@ def retrieve(
     from photoshape_flow.classify.assignment import median_lab
     from photoshape_flow.classify.color_prior import color_likelihood
     from photoshape_flow.config import get_settings
-    from photoshape_flow.db.models import Material
+    from photoshape_flow.db.models import Classifier, Material
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.inference import color_prior_for
     from photoshape_flow.pipeline.training import load_material_classifier
@@ -73,7 +73,8 @@ def retrieve(
     material_probs, substance_probs = model.predict(photo, masks, crop=crop)  # type: ignore[arg-type]
     colours = None
     with session_scope(settings.resolved_database_url) as session:
-        prior = color_prior_for(session, BlobStore(settings.blob_root), model.materials) if color_prior else None
+        prior = color_prior_for(session, BlobStore(settings.blob_root), model.materials,
+                                session.get(Classifier, row.id)) if color_prior else None
     if prior is not None:
         labs, sigma = prior
         colours = np.stack([color_likelihood(median_lab(photo, region), labs, sigma) for region in masks])

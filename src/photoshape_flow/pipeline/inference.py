@@ -163,7 +163,7 @@ class _Context:
         self.model_labs: np.ndarray | None = None
         if method == "classifier" and color_prior:
             assert self.model is not None
-            prior = color_prior_for(session, store, self.model.materials)
+            prior = color_prior_for(session, store, self.model.materials, classifier)
             if prior is not None:
                 self.model_labs, self.color_sigma = prior
         # part-level temperature of each substance network whose rows weight the ranking
@@ -198,25 +198,42 @@ class _Context:
 
 
 def fit_classifier_color_sigma(
-    session: Session, store: BlobStore, material_labs: dict[int, np.ndarray]
+    session: Session, store: BlobStore, material_labs: dict[int, np.ndarray],
+    classifier: m.Classifier | None = None,
 ) -> float | None:
-    """sigma of the colour likelihood from the classifier's validation renders (None when there are none)."""
+    """sigma of the colour likelihood from the validation renders (None when there are none).
+
+    With `classifier`, the fit is cached in its `metrics` (`color_sigma`, keyed by the validation
+    renders and the material colours), so `photoshape retrieve` and later inference runs do not
+    re-read hundreds of renders; the caller's session commits it.
+    """
     from photoshape_flow.pipeline.training import training_data
 
     data = training_data(session, store)
+    key = _hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
+                 "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
+    metrics = dict(classifier.metrics or {}) if classifier is not None else {}
+    if classifier is not None and metrics.get("color_sigma_key") == key:
+        cached = metrics.get("color_sigma")
+        return None if cached is None else float(cached)
     sigma = fit_color_sigma(region_color_distances(data.val, material_labs, limit=COLOR_SIGMA_RENDERS))
     log.info("colour likelihood sigma %s (CIELAB, fit on %d validation renders)",
              f"{sigma:.2f}" if sigma else "none", min(len(data.val), COLOR_SIGMA_RENDERS))
+    if classifier is not None:
+        classifier.metrics = {**metrics, "color_sigma": sigma, "color_sigma_key": key}
     return sigma
 
 
 def color_prior_for(
-    session: Session, store: BlobStore, materials: Sequence[int]
+    session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier | None = None
 ) -> tuple[np.ndarray, float] | None:
-    """(material colours in `materials` order, sigma) for the colour likelihood, None without data."""
+    """(material colours in `materials` order, sigma) for the colour likelihood, None without data.
+
+    `classifier`: the material classifier the sigma is cached on (`fit_classifier_color_sigma`).
+    """
     rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
     labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
-    sigma = fit_classifier_color_sigma(session, store, labs) if labs else None
+    sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
     return (material_lab_matrix(materials, labs), sigma) if sigma is not None else None
 
 
