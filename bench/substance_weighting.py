@@ -16,8 +16,9 @@ material top-1/top-5 against the ground truth for
   - sqrt(material head) x network x colour: the material head tempered (T = 2), a diagnostic of
                       whether the material head is over-confident against the other two,
 and the substance accuracy of each ranking's top-1 material, next to the substance network's own
-argmax (what the no-classifier baseline picks). First, on the validation renders (where sigma is fit):
-the material head with and without the colour likelihood, on the renders' exact material regions.
+argmax (what the no-classifier baseline picks). First, on the validation renders (where sigma and
+the temperature are fit, and where a ranking may be chosen without touching the exemplars): the
+rankings on the renders' exact material regions.
 Prints tables and writes bench/results/substance_weighting.json.
 
     python bench/substance_weighting.py [groundtruth.json]
@@ -42,6 +43,7 @@ from photoshape_flow.classify.color_prior import (
 )
 from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.substance_calibration import temper
+from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model, predict_substances
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -68,9 +70,19 @@ def _print(title: str, result: dict[str, dict[str, float]]) -> None:
               f"| {r['parts']} |")
 
 
-def validation_renders(clf, data, labs: np.ndarray, sigma: float) -> dict[str, dict[str, float]]:
-    """Material head with and without the colour likelihood on the validation renders' material regions."""
+def validation_renders(clf, data, labs: np.ndarray, sigma: float, network: tuple, temperature: float | None,
+                       material_substance: dict[int, str]) -> dict[str, dict[str, float]]:
+    """Every ranking on the validation renders' exact material regions: where a ranking may be chosen.
+
+    The substance network's confidence for a region is `part_substances` over the region, as for an
+    aligned part; "colour within substance" renormalises the colour likelihood inside each substance
+    (colour picks the material, never the substance), a variant considered and not adopted.
+    """
+    from photoshape_flow.classify.substance_parts import part_substances
+
+    model, size = network
     index = {mid: i for i, mid in enumerate(clf.materials)}
+    subs = np.array(clf.material_substances)
     hits: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
     for item in data.val[:COLOR_SIGMA_RENDERS]:
         ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
@@ -80,12 +92,27 @@ def validation_renders(clf, data, labs: np.ndarray, sigma: float) -> dict[str, d
         if not regions:
             continue
         probs, _ = clf.predict(rgb, [mask for _, mask in regions])
-        for k, (mid, mask) in enumerate(regions):
-            colour = color_likelihood(median_lab(rgb, mask), labs, sigma)[None]
-            for name, weights in (("none", None), ("colour", colour)):
-                ranked = clf.top_k(probs[k:k + 1], None, k=5, weight_by_substance=False, color_weights=weights)[0]
+        net = part_substances(ids, predict_substances(model, rgb, size), [r[0] for r in regions])
+        for k, ((mid, mask), part) in enumerate(zip(regions, net, strict=True)):
+            true_sub = material_substance[mid]
+            raw, calibrated = substance_vector(part.probs), substance_vector(temper(part.probs, temperature))
+            colour = color_likelihood(median_lab(rgb, mask), labs, sigma)
+            within = colour.copy()
+            for name in set(subs.tolist()):
+                within[subs == name] /= colour[subs == name].sum()
+            hits["network argmax (substance only)"].append(
+                (float("nan"), float("nan"), float(part.substance == true_sub)))
+            variants = {"none": (None, None), "colour": (None, colour), "network": (raw, None),
+                        "calibrated network": (calibrated, None), "network + colour": (raw, colour),
+                        "calibrated network + colour (pipeline)": (calibrated, colour),
+                        "calibrated network + colour within substance": (calibrated, within)}
+            for name, (weights, colours) in variants.items():
+                ranked = clf.top_k(probs[k:k + 1], None if weights is None else weights[None], k=5,
+                                   weight_by_substance=weights is not None,
+                                   color_weights=None if colours is None else colours[None])[0]
                 picked = [r.material_id for r in ranked]
-                hits[name].append((float(picked[0] == mid), float(mid in picked), float("nan")))
+                hits[name].append(
+                    (float(picked[0] == mid), float(mid in picked), float(ranked[0].substance == true_sub)))
     return _summary(hits)
 
 
@@ -111,13 +138,16 @@ def main() -> None:
         print(f"classifier {row.name} on {gt_path}")
         print(f"colour sigma {sigma:.2f} CIELAB from {len(distances)} validation regions "
               f"(median dE {np.median(distances):.1f})")
-        val = validation_renders(clf, data, labs, sigma)
-        _print("validation renders, exact material regions (material head alone)", val)
-
         networks = session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars().all()
         session.commit()
         temperatures = {n: substance_temperature(settings, n) for n in networks if n is not None}
         print(f"substance network part temperatures {temperatures}")
+        newest = max(temperatures)
+        net_row = session.get(m.Classifier, newest)
+        network = load_model(checkpoint_from_bytes(store.read_bytes(net_row.checkpoint_blob)))
+        val = validation_renders(clf, data, labs, sigma, (network, int(net_row.config.get("size") or 128)),
+                                 temperatures[newest], {mat.id: mat.substance for mat in materials})
+        _print("validation renders, exact material regions", val)
         truths = _exemplar_truths(session, gt, None)
         pairs = session.execute(
             sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
