@@ -82,3 +82,20 @@ def test_pure_helpers() -> None:
     red = median_lab(solid(RED))
     ranked = color_match(red, {1: median_lab(solid(BLUE)), 2: red}, {1: "wood", 2: "wood"})
     assert ranked[0].material_id == 2 and ranked[0].score == pytest.approx(1.0)
+
+
+def test_new_part_substances_make_exactly_that_pairs_rows_stale(aligned_pair: dict[str, int]) -> None:
+    """A retrained substance network rewrites part substances: the baseline that reads them follows."""
+    assert run_inference("no-classifier").pairs_done == 1
+    assert run_inference("no-classifier").pairs_done == 0  # nothing changed: nothing redone
+    with session_scope() as session:
+        row = session.execute(sa.select(m.PartSubstance).where(
+            m.PartSubstance.pair_id == aligned_pair["pair"], m.PartSubstance.part_id == aligned_pair["seat"])
+        ).scalar_one()
+        row.substance, row.probs, row.params_hash = "fabric", {"fabric": 0.9, "leather": 0.1}, "retrained"
+    again = run_inference("no-classifier")
+    assert again.pairs_done == 1 and not again.pairs_failed
+    with session_scope() as session:
+        seat = session.get(m.Material, _top1("no-classifier")[aligned_pair["seat"]][0])
+    assert seat.substance == "fabric"
+    assert run_inference("no-classifier").pairs_done == 0

@@ -101,25 +101,42 @@ def resolve_classifier(session: Session, classifier_id: int | None = None) -> m.
     ).scalar_one_or_none()
 
 
-def pending_pairs(
-    session: Session, method_key: str, params_hash: str, pair_ids: Sequence[int] | None = None
-) -> list[int]:
-    """Aligned, non-excluded pairs whose rows for this method are missing or stale."""
-    done = sa.select(m.Assignment.pair_id).where(
-        m.Assignment.method_key == method_key, m.Assignment.params_hash == params_hash
-    )
+def pair_hashes(session: Session, params_hash: str, pair_ids: Sequence[int] | None = None) -> dict[int, str]:
+    """The hash each aligned, non-excluded pair's rows must carry: the method's parameters and the pair's inputs.
+
+    A pair's inputs are its alignment (`params_hash`) and its part substances (theirs), so a
+    re-aligned pair or a retrained substance network makes exactly the affected rows stale, for the
+    baselines as for ours.
+    """
     query = (
-        sa.select(m.Pair.id)
+        sa.select(m.Pair.id, m.Alignment.params_hash)
         .join(m.Shape, m.Shape.id == m.Pair.shape_id)
         .join(m.Exemplar, m.Exemplar.id == m.Pair.exemplar_id)
         .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD))
         .where(~m.Pair.exclude, ~m.Shape.exclude, ~m.Exemplar.exclude, m.Alignment.status == "ok")
-        .where(m.Pair.id.not_in(done))
         .order_by(m.Pair.id)
     )
     if pair_ids is not None:
         query = query.where(m.Pair.id.in_(list(pair_ids)))
-    return list(session.execute(query).scalars())
+    alignments = dict(session.execute(query).tuples().all())
+    substances: dict[int, list[tuple[int, str | None]]] = {}
+    rows = sa.select(m.PartSubstance.pair_id, m.PartSubstance.part_id, m.PartSubstance.params_hash)
+    if pair_ids is not None:
+        rows = rows.where(m.PartSubstance.pair_id.in_(list(pair_ids)))
+    for pair_id, part_id, part_hash in session.execute(rows.order_by(m.PartSubstance.pair_id, m.PartSubstance.part_id)):
+        substances.setdefault(pair_id, []).append((part_id, part_hash))
+    return {pair_id: _hash({"params": params_hash, "alignment": alignment, "substances": substances.get(pair_id, [])})
+            for pair_id, alignment in alignments.items()}
+
+
+def pending_pairs(session: Session, method_key: str, expected: dict[int, str]) -> list[int]:
+    """Pairs of `expected` (pair -> hash, `pair_hashes`) whose rows for this method are missing or stale."""
+    stored = dict(session.execute(
+        sa.select(m.Assignment.pair_id, m.Assignment.params_hash)
+        .where(m.Assignment.method_key == method_key)
+        .distinct()
+    ).tuples().all())
+    return [pair_id for pair_id, digest in sorted(expected.items()) if stored.get(pair_id) != digest]
 
 
 def _hash(payload: dict[str, Any]) -> str:
@@ -408,15 +425,16 @@ def run_inference(
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
         ctx = _Context(session, store, method, classifier, settings, top_k, color_prior, calibrate_substances)
         method_key = f"classifier:{classifier.id}" if classifier is not None else method
-        params_hash = _hash(ctx.params)
-        todo = pending_pairs(session, method_key, params_hash, pair_ids)
+        expected = pair_hashes(session, _hash(ctx.params), pair_ids)
+        todo = pending_pairs(session, method_key, expected)
     summary = InferenceSummary(method_key=method_key)
     stage = f"inference:{method_key}"
     for start in range(0, len(todo), batch_size):
         keys = [str(p) for p in todo[start : start + batch_size]]
         with session_scope(url) as session:
-            mine = claims.claim(session, stage, keys, params_hash=params_hash,
-                                lease_seconds=settings.claim_lease_seconds, retry_failed=True)
+            mine = [key for key in keys
+                    for _ in claims.claim(session, stage, [key], params_hash=expected[int(key)],
+                                          lease_seconds=settings.claim_lease_seconds, retry_failed=True)]
         summary.pairs_skipped += len(keys) - len(mine)
         for key in mine:
             pair_id = int(key)
@@ -424,7 +442,7 @@ def run_inference(
                 with session_scope(url) as session:
                     pair = session.get(m.Pair, pair_id)
                     assert pair is not None
-                    summary.rows += infer_pair(session, ctx, pair, method_key, params_hash)
+                    summary.rows += infer_pair(session, ctx, pair, method_key, expected[pair_id])
                     claims.complete(session, stage, [key])
                 summary.pairs_done += 1
             except Exception as exc:  # one bad pair never stops the batch
