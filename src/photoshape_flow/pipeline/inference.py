@@ -118,7 +118,7 @@ def pair_hashes(session: Session, params_hash: str, pair_ids: Sequence[int] | No
     )
     if pair_ids is not None:
         query = query.where(m.Pair.id.in_(list(pair_ids)))
-    alignments = dict(session.execute(query).tuples().all())
+    alignments = dict(session.execute(query).all())
     substances: dict[int, list[tuple[int, str | None]]] = {}
     rows = sa.select(m.PartSubstance.pair_id, m.PartSubstance.part_id, m.PartSubstance.params_hash)
     if pair_ids is not None:
@@ -135,7 +135,7 @@ def pending_pairs(session: Session, method_key: str, expected: dict[int, str]) -
         sa.select(m.Assignment.pair_id, m.Assignment.params_hash)
         .where(m.Assignment.method_key == method_key)
         .distinct()
-    ).tuples().all())
+    ).all())
     return [pair_id for pair_id, digest in sorted(expected.items()) if stored.get(pair_id) != digest]
 
 
