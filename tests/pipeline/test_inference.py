@@ -99,3 +99,16 @@ def test_new_part_substances_make_exactly_that_pairs_rows_stale(aligned_pair: di
         seat = session.get(m.Material, _top1("no-classifier")[aligned_pair["seat"]][0])
     assert seat.substance == "fabric"
     assert run_inference("no-classifier").pairs_done == 0
+
+
+def test_a_part_too_small_to_classify_keeps_the_substance_the_network_saw(aligned_pair: dict[str, int]) -> None:
+    with session_scope() as session:  # the substance stage saw a few pixels of the hidden part
+        row = session.execute(sa.select(m.PartSubstance).where(
+            m.PartSubstance.pair_id == aligned_pair["pair"], m.PartSubstance.part_id == aligned_pair["hidden"])
+        ).scalar_one()
+        row.observed, row.substance, row.probs, row.pixel_count = True, "wood", {"wood": 0.8, "fabric": 0.2}, 3
+    run_inference("no-classifier")
+    material, unobserved = _top1("no-classifier")[aligned_pair["hidden"]]
+    assert unobserved  # still too small for the classifier, and marked so
+    with session_scope() as session:
+        assert session.get(m.Material, material).substance == "wood"  # not the fabric/leather prior

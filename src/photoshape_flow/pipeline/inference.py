@@ -1,9 +1,10 @@
 """Inference stage: a ranked material per part of every aligned pair, for the classifier and baselines.
 
 For each pair with a fine alignment, each part visible in the aligned (CRF) part map is classified on
-the exemplar with its mask; parts with no pixels are *unobserved*: their substance comes from a prior
-(the substances the same part showed in the shape's other pairs, else a part-name prior), their
-material from the method restricted to that substance, and their rows are marked `unobserved`.
+the exemplar with its mask; parts with too few pixels for the classifier are *unobserved*: their
+substance is the substance network's when it saw the part (inference-5), else a prior (the substances
+the same part showed in the shape's other pairs, else a part-name prior), their material comes from
+the method restricted to that substance, and their rows are marked `unobserved`.
 
 Methods (`assignment.method`): `classifier` (ours: material probability x calibrated substance
 confidence x colour likelihood, both fit on validation renders; rows keyed `classifier:<id>` so a new
@@ -55,7 +56,7 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-CODE_VERSION = "inference-4"  # 2: flip-averaged probabilities; 3: colour likelihood; 4: calibrated substances
+CODE_VERSION = "inference-5"  # 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
@@ -368,6 +369,9 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
                 # aligned but no substance row (substances stage not run): fall back to the prior
                 sub, prior = _prior_substance(session, part, pair.id, ctx.available_substances)
                 view = PartSubstanceView(sub, prior, True)
+            elif ps is not None and ps.observed and ps.substance in ctx.available_substances:
+                # too small for the classifier, but the substance network saw it: its substance beats a prior
+                view = PartSubstanceView(ps.substance, dict(ps.probs or {}), False, ps.classifier_id)
             else:
                 sub, prior = _prior_substance(session, part, pair.id, ctx.available_substances)
                 view = PartSubstanceView(sub, prior, False)
