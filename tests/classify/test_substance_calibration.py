@@ -8,6 +8,7 @@ import pytest
 from photoshape_flow.classify.substance_calibration import (
     MIN_PARTS,
     fit_temperature,
+    nll,
     part_calibration_set,
     temper,
 )
@@ -74,3 +75,10 @@ def test_calibration_set_reads_parts_and_their_true_substance() -> None:
     np.testing.assert_allclose(calibration.probs.sum(axis=1), 1.0)
     with pytest.raises(ValueError):
         part_calibration_set([(probs, part_ids[:10], substance_ids)])
+
+
+def test_nll_is_log_of_the_classes_for_uniform_and_drops_when_sharpening_right_answers() -> None:
+    uniform = np.full((4, len(SUBSTANCES)), 1.0 / len(SUBSTANCES))
+    assert nll(uniform, [0, 1, 2, 3]) == pytest.approx(np.log(len(SUBSTANCES)))
+    right = np.tile([0.4, 0.15, 0.15, 0.15, 0.15], (3, 1))
+    assert nll(right, [0, 0, 0], temperature=0.5) < nll(right, [0, 0, 0]) == pytest.approx(-np.log(0.4))

@@ -48,11 +48,17 @@ def temper(probs: Mapping[str, float] | None, temperature: float | None) -> dict
     if values.sum() <= 0:
         return {}
     if temperature is not None and temperature != 1.0:
+        impossible = values <= 0.0
         logp = np.log(np.maximum(values, _EPS)) / float(temperature)
         values = np.exp(logp - logp.max())
-        values[np.array([float(probs.get(s, 0.0) or 0.0) <= 0.0 for s in SUBSTANCES])] = 0.0
+        values[impossible] = 0.0
     values /= values.sum()
     return {s: float(v) for s, v in zip(SUBSTANCES, values, strict=True)}
+
+
+def nll(probs: np.ndarray, truth: Sequence[int] | np.ndarray, temperature: float = 1.0) -> float:
+    """Mean negative log-likelihood of the true substances under probabilities (N, |S|) tempered by T."""
+    return _nll(np.log(np.maximum(np.asarray(probs, np.float64), _EPS)), np.asarray(truth, np.int64), temperature)
 
 
 def _nll(logp: np.ndarray, truth: np.ndarray, temperature: float) -> float:

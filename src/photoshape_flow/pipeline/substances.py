@@ -40,7 +40,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS, SUBSTANCES
+from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS
 
 log = logging.getLogger(__name__)
 
@@ -206,7 +206,7 @@ def calibration_renders(session: sa.orm.Session, limit: int = CALIBRATION_RENDER
     return [(f"{kind}/{key}", blobs or {}) for kind, key, blobs in rows]
 
 
-def substance_temperature(settings: Settings, classifier_id: int, model: Any = None) -> float | None:
+def substance_temperature(settings: Settings, classifier_id: int) -> float | None:
     """Part-level temperature of a substance network (`classify.substance_calibration`).
 
     Fit on renders of shapes and envmaps the network never trained on (`calibration_renders`: the
@@ -215,7 +215,7 @@ def substance_temperature(settings: Settings, classifier_id: int, model: Any = N
     before and after, and a key of the renders used): refit only when those renders change, and
     a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
     """
-    from photoshape_flow.classify.substance_calibration import fit_temperature, part_calibration_set, temper
+    from photoshape_flow.classify.substance_calibration import fit_temperature, nll, part_calibration_set
     from photoshape_flow.classify.substance_train import (
         checkpoint_from_bytes,
         load_model,
@@ -237,8 +237,7 @@ def substance_temperature(settings: Settings, classifier_id: int, model: Any = N
             return None if value is None else float(value)
         size = int((row.config or {}).get("size") or 128)
         checkpoint_ref = row.checkpoint_blob
-    if model is None:
-        model = load_model(checkpoint_from_bytes(store.read_bytes(checkpoint_ref)), resolve_device(settings.device))
+    model = load_model(checkpoint_from_bytes(store.read_bytes(checkpoint_ref)), resolve_device(settings.device))
     predictions = []
     for key, blobs in renders:
         try:
@@ -257,13 +256,9 @@ def substance_temperature(settings: Settings, classifier_id: int, model: Any = N
     info: dict[str, Any] = {"part_temperature": temperature, "part_temperature_parts": len(calibration),
                             "part_temperature_renders": len(predictions), "part_temperature_key": cache_key}
     if len(calibration):
-        truth, raw = calibration.truth, calibration.probs
-        tempered = raw if temperature is None else np.array(
-            [[temper(dict(zip(SUBSTANCES, r, strict=True)), temperature)[s] for s in SUBSTANCES] for r in raw])
-        rows = np.arange(len(truth))
-        info["part_accuracy"] = float((raw.argmax(axis=1) == truth).mean())
-        info["part_nll"] = float(-np.log(np.maximum(raw[rows, truth], 1e-6)).mean())
-        info["part_nll_tempered"] = float(-np.log(np.maximum(tempered[rows, truth], 1e-6)).mean())
+        info["part_accuracy"] = float((calibration.probs.argmax(axis=1) == calibration.truth).mean())
+        info["part_nll"] = nll(calibration.probs, calibration.truth)
+        info["part_nll_tempered"] = nll(calibration.probs, calibration.truth, temperature or 1.0)
     with session_scope(url) as session:
         row = session.get(m.Classifier, classifier_id)
         if row is not None and row.checkpoint_blob == checkpoint_ref:
