@@ -11,7 +11,14 @@ version, so the only difference is the sampling:
   - as stored:         the rendering row's image (e.g. 128 px, 32 spp),
   - clean, same size:  re-rendered at the same size with `--spp-clean` samples,
   - photo-like:        re-rendered at `--photo-size` px with `--photo-spp` (the demo exemplars'
-                       settings by default) and shrunk by the classifier's own area filter.
+                       settings by default) and shrunk by the classifier's own area filter,
+with `--conditions` also
+  - photo-like + degradation: the same, imaged as the demo images an exemplar (exposure, white
+                       balance, blur, sensor noise, JPEG: `demo.exemplars.degrade`),
+  - framed like a photo: the stored quality, the camera moved so the shape fills 80-94% of the frame,
+  - one material per substance: the stored quality, parts of a substance sharing its first part's
+                       material (as products often are; its regions are unions of parts, so this
+                       row is not paired with the others).
 
 Only validation renders (held-out shapes and envmaps) are used, never exemplars, so whatever this
 shows may be acted on without tuning on the test set. Prints a table and writes
@@ -40,6 +47,8 @@ from photoshape_flow.pipeline.training_renders import _Inputs
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.example import render_training_example
 from photoshape_flow.synth.spec import RenderSpec
+
+DEGRADED = "photo-like + photo degradation + JPEG"
 
 
 def regions(ids: np.ndarray, known: set[int]) -> list[tuple[int, np.ndarray]]:
@@ -78,6 +87,24 @@ def shared(spec: RenderSpec) -> RenderSpec:
     return dataclasses.replace(spec, parts=parts)
 
 
+def photo(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: int, spp: int):
+    """(sRGB uint8, material-id map) of `spec` imaged like a demo exemplar: rendered on transparent at
+    photo size, then the demo's photo degradation (exposure, white balance, blur, noise) and JPEG."""
+    import cv2
+
+    from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
+    from photoshape_flow.synth.example import build_scene_inputs, label_maps
+
+    camera, materials, uv_transforms, envmap = build_scene_inputs(mesh, spec, material_specs, envmap_spec)
+    result = renderer.beauty(mesh, materials, camera, envmap, size=size, spp=spp, uv_transforms=uv_transforms,
+                             background="transparent", seed=int(spec.seed % (2**31 - 1)))
+    params = sample_degradation(np.random.default_rng(spec.seed % 2**32))
+    jpeg = encode_jpeg(degrade(result.hdr, result.alpha, params), params["jpeg_quality"])
+    rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    material_ids, _ = label_maps(np.asarray(renderer.part_ids(mesh, camera, size=size)), spec)
+    return rgb, material_ids
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=120, help="validation renders to re-render")
@@ -87,8 +114,8 @@ def main() -> None:
     parser.add_argument("--photo-size", type=int, default=320)
     parser.add_argument("--photo-spp", type=int, default=48)
     parser.add_argument("--conditions", action="store_true",
-                        help="also re-render at the stored quality with the camera framed like a product photo, "
-                             "and with one material per substance")
+                        help="also: photo-like with the demo exemplars' photo degradation and JPEG; and, at the "
+                             "stored quality, the camera framed like a product photo and one material per substance")
     args = parser.parse_args()
 
     from photoshape_flow.render import Renderer
@@ -100,6 +127,9 @@ def main() -> None:
     renderer = Renderer(resolve=store.resolve)
     inputs = _Inputs(store=store)
     results: dict[str, list[tuple[int, int]]] = {"as stored": [], "clean, same size": [], "photo-like": []}
+    if args.conditions:
+        results[DEGRADED] = []
+    paired = list(results)
     seconds: dict[str, float] = {"clean, same size": 0.0, "photo-like": 0.0}
     stored_quality = (0, 0)
     with session_scope() as session:
@@ -131,7 +161,15 @@ def main() -> None:
                 mine = [(mid, example.material_ids == mid) for mid, _ in found]
                 if all(mask.any() for _, mask in mine):
                     scored[name] = score(clf, example.srgb, mine)
-            if len(scored) == 3:  # paired: every quality scores the same regions
+            if args.conditions:
+                started = time.perf_counter()
+                rgb, ids = photo(renderer, inputs.mesh(spec.shape_id), spec, inputs.material_specs(spec),
+                                 inputs.envmap_spec(spec.envmap.envmap_id), args.photo_size, args.photo_spp)
+                seconds[DEGRADED] = seconds.get(DEGRADED, 0.0) + time.perf_counter() - started
+                mine = [(mid, ids == mid) for mid, _ in found]
+                if all(mask.any() for _, mask in mine):
+                    scored[DEGRADED] = score(clf, rgb, mine)
+            if set(scored) == set(paired):  # paired: every version scores the same regions
                 for name, hits in scored.items():
                     results[name] += hits
             if args.conditions:
