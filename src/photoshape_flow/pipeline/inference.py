@@ -436,9 +436,10 @@ def run_inference(
     for start in range(0, len(todo), batch_size):
         keys = [str(p) for p in todo[start : start + batch_size]]
         with session_scope(url) as session:
-            mine = [key for key in keys
-                    for _ in claims.claim(session, stage, [key], params_hash=expected[int(key)],
-                                          lease_seconds=settings.claim_lease_seconds, retry_failed=True)]
+            mine: list[str] = []
+            for key in keys:  # one claim per pair: each pair's rows carry their own hash
+                mine += claims.claim(session, stage, [key], params_hash=expected[int(key)],
+                                     lease_seconds=settings.claim_lease_seconds, retry_failed=True)
         summary.pairs_skipped += len(keys) - len(mine)
         for key in mine:
             pair_id = int(key)
