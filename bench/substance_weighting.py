@@ -42,6 +42,7 @@ from photoshape_flow.classify.color_prior import (
     region_color_distances,
 )
 from photoshape_flow.classify.dataset import load_label_map, load_rgb
+from photoshape_flow.classify.infer import substance_first_order
 from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model, predict_substances
 from photoshape_flow.config import get_settings
@@ -113,6 +114,13 @@ def validation_renders(clf, data, labs: np.ndarray, sigma: float, network: tuple
                 picked = [r.material_id for r in ranked]
                 hits[name].append(
                     (float(picked[0] == mid), float(mid in picked), float(ranked[0].substance == true_sub)))
+            for name, colours in (("calibrated network + colour, substance by marginal", colour),
+                                  ("calibrated network + colour within substance, substance by marginal", within)):
+                scores = clf.scores(probs[k:k + 1], calibrated[None], colours[None])[0]
+                order = substance_first_order(scores, subs)[:5]
+                best = subs[order[0]]
+                picked = [clf.materials[i] for i in order]
+                hits[name].append((float(picked[0] == mid), float(mid in picked), float(best == true_sub)))
     return _summary(hits)
 
 
@@ -190,15 +198,14 @@ def main() -> None:
                             "colour only": (None, colour[1.0] * uniform[:, 1:]),
                             "sqrt(material head) x network x colour": (network, colour[1.0])}
                 # marginal-first: the substance with the most posterior mass, then its best material
-                scores = clf.scores(mat_probs[k:k + 1], network[None], colour[1.0])[0]
                 subs_of = np.array(clf.material_substances)
-                mass = {s: scores[subs_of == s].sum() for s in set(clf.material_substances)}
-                best_sub = max(mass, key=mass.get)
-                order = list(np.argsort(-scores, kind="stable"))
-                first = next(i for i in order if subs_of[i] == best_sub)
-                picked = [names[clf.materials[i]] for i in [first, *[i for i in order if i != first]][:5]]
-                hits["network + colour, substance by marginal"].append(
-                    (float(picked[0] == truth), float(truth in picked), float(best_sub == true_sub)))
+                for label, weights in (("network", network), ("calibrated network", calibrated)):
+                    scores = clf.scores(mat_probs[k:k + 1], weights[None], colour[1.0])[0]
+                    order = substance_first_order(scores, subs_of)[:5]
+                    best_sub = subs_of[order[0]]
+                    picked = [names[clf.materials[i]] for i in order]
+                    hits[f"{label} + colour, substance by marginal"].append(
+                        (float(picked[0] == truth), float(truth in picked), float(best_sub == true_sub)))
                 for name, (weights, colours) in variants.items():
                     probs = uniform if name == "colour only" else mat_probs[k:k + 1]
                     if name.startswith("sqrt"):  # a tempered material head: the other evidence weighs more

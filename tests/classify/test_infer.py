@@ -114,3 +114,21 @@ def test_a_sharper_calibrated_substance_confidence_outweighs_the_material_head()
     calibrated = substance_vector(temper(network, 0.25))[None]  # validation parts say: trust it more
     sharp = classifier.top_k(material, calibrated, k=3)[0]
     assert sharp[0].material_id == 4 and sharp[0].substance == "wood"
+
+
+def test_substance_first_takes_the_substance_with_most_mass_then_its_best_material() -> None:
+    from photoshape_flow.classify.infer import substance_first_order
+
+    classifier = load_classifier(_checkpoint(), device="cpu")
+    # fabric's one material scores highest, but wood's two materials together hold more mass
+    material = np.array([[0.1, 0.28, 0.34, 0.28]])  # background, 4 (wood), 9 (fabric), 12 (wood)
+    by_score = classifier.top_k(material, None, k=3, weight_by_substance=False)[0]
+    assert [r.material_id for r in by_score] == [9, 4, 12]
+    decided = classifier.top_k(material, None, k=3, weight_by_substance=False, substance_first=True)[0]
+    assert [r.material_id for r in decided] == [4, 9, 12]  # wood first; the rest still by score
+    assert decided[0].substance == "wood" and decided[0].score == pytest.approx(0.28)
+    assert [r.material_id for r in classifier.top_k(material, None, k=1, weight_by_substance=False,
+                                                    substance_first=True)[0]] == [4]
+    # when the best material's substance also holds the most mass, nothing moves
+    assert list(substance_first_order(np.array([0.5, 0.3, 0.2]), SUBSTANCES)) == [0, 1, 2]
+    assert substance_first_order(np.zeros(0), []).size == 0

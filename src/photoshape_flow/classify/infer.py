@@ -42,6 +42,28 @@ class Ranked:
     probability: float  # the material head's softmax probability
 
 
+def substance_first_order(scores: np.ndarray, substances: Sequence[str]) -> np.ndarray:
+    """Material indices for one region, best first, deciding the substance before the material.
+
+    The first material is the best-scoring one of the substance with the most ranking mass (the sum
+    of its materials' scores); the others follow by score. Why: the scores are an (unnormalised)
+    posterior over materials, and the substance that posterior believes most is the sum over the
+    substance's materials, not the substance of the single best material, which a cluster of
+    similar materials of another substance can outvote by splitting the mass. Choosing the
+    substance first is the Bayes decision for the substance and costs the material ranking nothing
+    measurable (docs/results.md, bench/substance_weighting.py).
+    """
+    scores = np.asarray(scores, dtype=np.float64)
+    labels = np.asarray(substances)
+    order = np.argsort(-scores, kind="stable")
+    if order.size == 0:
+        return order
+    mass = {name: float(scores[labels == name].sum()) for name in dict.fromkeys(labels.tolist())}
+    best = max(mass, key=lambda name: mass[name])  # ties: the first substance in material order
+    first = next(int(i) for i in order if labels[i] == best)
+    return np.concatenate([[first], order[order != first]]).astype(np.int64)
+
+
 def _square(image: np.ndarray, mask: np.ndarray, crop: CropMode, context: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Pad (white / 0) or crop around the mask to a square, keeping the region fully inside."""
     height, width = mask.shape
@@ -157,13 +179,21 @@ class MaterialClassifier:
         k: int = 10,
         weight_by_substance: bool = True,
         color_weights: np.ndarray | None = None,
+        substance_first: bool = False,
     ) -> list[list[Ranked]]:
-        """The k best materials per region, best first."""
+        """The k best materials per region, best first.
+
+        With `substance_first` the first material is chosen within the substance of most ranking
+        mass (`substance_first_order`; what inference and retrieval do), else by score alone.
+        """
         scores = self.scores(material_probs, substance_probs if weight_by_substance else None, color_weights)
         probs = np.asarray(material_probs)[:, 1:]
         results = []
         for row in range(scores.shape[0]):
-            order = np.argsort(-scores[row], kind="stable")[: max(0, k)]
+            if substance_first:
+                order = substance_first_order(scores[row], self.material_substances)[: max(0, k)]
+            else:
+                order = np.argsort(-scores[row], kind="stable")[: max(0, k)]
             results.append([
                 Ranked(self.materials[i], self.material_substances[i], float(scores[row, i]), float(probs[row, i]))
                 for i in order

@@ -79,7 +79,7 @@ def retrieve(
         labs, sigma = prior
         colours = np.stack([color_likelihood(median_lab(photo, region), labs, sigma) for region in masks])
     ranked = model.top_k(material_probs, substance_probs, k=top, weight_by_substance=substance_weighting,
-                         color_weights=colours)
+                         color_weights=colours, substance_first=True)
     ids = sorted({r.material_id for regions in ranked for r in regions})
     with session_scope(settings.resolved_database_url) as session:
         rows = session.execute(sa.select(Material.id, Material.name).where(Material.id.in_(ids)))

@@ -7,7 +7,8 @@ the same part showed in the shape's other pairs, else a part-name prior), their 
 the method restricted to that substance, and their rows are marked `unobserved`.
 
 Methods (`assignment.method`): `classifier` (ours: material probability x calibrated substance
-confidence x colour likelihood, both fit on validation renders; rows keyed `classifier:<id>` so a new
+confidence x colour likelihood, both fit on validation renders, the first material taken from the
+substance with the most of that score (inference-6); rows keyed `classifier:<id>` so a new
 classifier adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
 path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
 claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
@@ -56,7 +57,8 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-CODE_VERSION = "inference-5"  # 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs
+# 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs; 6 substance decided first
+CODE_VERSION = "inference-6"
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
@@ -324,7 +326,8 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
             item.color = dict(zip(ctx.model.materials, colors[0].tolist(), strict=True))
     else:  # unobserved: only the prior substance's materials
         weights = one_substance(sub.substance) if sub.substance else substance_vector(None)
-    ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials), color_weights=colors)[0]
+    ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials), color_weights=colors,
+                             substance_first=True)[0]
     enabled = ctx.material_substance
     kept = [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked if r.material_id in enabled]
     return kept[: ctx.top_k]
