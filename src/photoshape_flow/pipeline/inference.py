@@ -326,9 +326,12 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
             item.color = dict(zip(ctx.model.materials, colors[0].tolist(), strict=True))
     else:  # unobserved: only the prior substance's materials
         weights = one_substance(sub.substance) if sub.substance else substance_vector(None)
+    # materials disabled since training can neither be chosen nor lend their substance mass
+    enabled = ctx.material_substance
+    allowed = np.array([[1.0 if mid in enabled else 0.0 for mid in ctx.model.materials]])
+    colors = allowed if colors is None else colors * allowed
     ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials), color_weights=colors,
                              substance_first=True)[0]
-    enabled = ctx.material_substance
     kept = [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked if r.material_id in enabled]
     return kept[: ctx.top_k]
 
