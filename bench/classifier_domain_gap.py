@@ -5,7 +5,9 @@ demo exemplars, i.e. with perfect masks, and prints top-1 / top-5, with and with
 region's prediction with its mirror image (`MaterialClassifier.flip`, on in the pipeline). Compare with the validation
 renders' mtl@1 / mtl@5 (the classifier row's metrics) and with the aligned parts
 (bench/substance_weighting.py, weighting "none"): the first gap is renders vs photos, the second
-the fine alignment's masks.
+the fine alignment's masks. The flip-averaged figures are also split by whether the exemplar
+shows a shape of the collection (whose training renders the classifier may have seen) or a
+held-out shape (new geometry: only look-alikes were rendered).
 
     PHOTOSHAPE_DATA_ROOT=... python bench/classifier_domain_gap.py [CLASSIFIER_ID]
 """
@@ -35,6 +37,7 @@ def main() -> None:
     classifier_id = int(sys.argv[1]) if len(sys.argv) > 1 else None
     row, clf = load_material_classifier(classifier_id, settings=settings)
     counts = {flip: [0, 0] for flip in (False, True)}
+    by_shape = {True: [0, 0, 0], False: [0, 0, 0]}  # in collection -> top-1, top-5, regions (flip-averaged)
     regions = 0
     with session_scope() as session:
         names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
@@ -55,12 +58,20 @@ def main() -> None:
                     picked = [names[r.material_id] for r in ranked]
                     counts[flip][0] += picked[0] == name
                     counts[flip][1] += name in picked
+                    if flip:
+                        by_shape[truth.in_collection][0] += picked[0] == name
+                        by_shape[truth.in_collection][1] += name in picked
+                        by_shape[truth.in_collection][2] += 1
     metrics = row.metrics or {}
     print(f"classifier {row.name} (id {row.id})")
     print(f"validation renders: mtl@1 {metrics.get('mtl@1')}, mtl@5 {metrics.get('mtl@5')}")
     for flip, (top1, top5) in counts.items():
         print(f"exemplar ground-truth regions ({regions}), {'flip-averaged' if flip else 'single view'}: "
               f"top-1 {top1 / regions:.3f}, top-5 {top5 / regions:.3f}")
+    for in_collection, (top1, top5, n) in by_shape.items():
+        if n:
+            print(f"  flip-averaged, exemplars of {'collection' if in_collection else 'held-out'} shapes ({n}): "
+                  f"top-1 {top1 / n:.3f}, top-5 {top5 / n:.3f}")
 
 
 if __name__ == "__main__":

@@ -18,7 +18,9 @@ with `--conditions` also
   - framed like a photo: the stored quality, the camera moved so the shape fills 80-94% of the frame,
   - one material per substance: the stored quality, parts of a substance sharing its first part's
                        material (as products often are; its regions are unions of parts, so this
-                       row is not paired with the others).
+                       row is not paired with the others),
+and with `--heldout-envmaps DIR` (the demo's `groundtruth/envmaps`, the studios only exemplars are lit by)
+  - held-out studio:   the stored quality, lit by one of those envmaps instead (same scale and rotation).
 
 Only validation renders (held-out shapes and envmaps) are used, never exemplars, so whatever this
 shows may be acted on without tuning on the test set. Prints a table and writes
@@ -116,6 +118,8 @@ def main() -> None:
     parser.add_argument("--conditions", action="store_true",
                         help="also: photo-like with the demo exemplars' photo degradation and JPEG; and, at the "
                              "stored quality, the camera framed like a product photo and one material per substance")
+    parser.add_argument("--heldout-envmaps", type=Path, default=None,
+                        help="a folder of envmaps (.hdr/.exr) to re-light each render with, at the stored quality")
     args = parser.parse_args()
 
     from photoshape_flow.render import Renderer
@@ -126,6 +130,8 @@ def main() -> None:
     known = set(clf.materials)
     renderer = Renderer(resolve=store.resolve)
     inputs = _Inputs(store=store)
+    heldout = sorted(p for ext in ("*.hdr", "*.exr") for p in args.heldout_envmaps.glob(ext)) \
+        if args.heldout_envmaps else []
     results: dict[str, list[tuple[int, int]]] = {"as stored": [], "clean, same size": [], "photo-like": []}
     if args.conditions:
         results[DEGRADED] = []
@@ -183,6 +189,17 @@ def main() -> None:
                     own = regions(example.material_ids, known)
                     if own:
                         results.setdefault(name, []).extend(score(clf, example.srgb, own))
+            if heldout:
+                from photoshape_flow.render import EnvmapSpec
+
+                lit = EnvmapSpec(path=heldout[len(results.get("held-out studio", [])) % len(heldout)])
+                started = time.perf_counter()
+                example = render_training_example(renderer, inputs.mesh(spec.shape_id), spec,
+                                                  inputs.material_specs(spec), lit, size, stored_spp)
+                seconds["held-out studio"] = seconds.get("held-out studio", 0.0) + time.perf_counter() - started
+                own = regions(example.material_ids, known)
+                if own:
+                    results.setdefault("held-out studio", []).extend(score(clf, example.srgb, own))
     summary = {
         "classifier": {"id": row.id, "name": row.name, "metrics": {k: (row.metrics or {}).get(k)
                                                                    for k in ("mtl@1", "mtl@5")}},
@@ -201,7 +218,7 @@ def main() -> None:
         print(f"| {name} | {r['regions']} | {r['top1']:.3f} | {r['top5']:.3f} | {secs} |")
     out = Path(__file__).parent / "results" / "render_quality_gap.json"
     out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(summary, indent=2))
+    out.write_text(json.dumps(summary, indent=2, default=str))
 
 
 if __name__ == "__main__":
