@@ -38,6 +38,7 @@ def main() -> None:
     row, clf = load_material_classifier(classifier_id, settings=settings)
     counts = {flip: [0, 0] for flip in (False, True)}
     by_shape = {True: [0, 0, 0], False: [0, 0, 0]}  # in collection -> top-1, top-5, regions (flip-averaged)
+    large = [0, 0, 0]  # regions of at least 0.5% of the image, the training examples' minimum (flip-averaged)
     regions = 0
     with session_scope() as session:
         names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
@@ -54,10 +55,14 @@ def main() -> None:
                 clf.flip = flip
                 probs, _ = clf.predict(image, [mask for mask, _ in masks])
                 ranked_all = clf.top_k(probs, None, k=5, weight_by_substance=False)
-                for ranked, (_, name) in zip(ranked_all, masks, strict=True):
+                for ranked, (mask, name) in zip(ranked_all, masks, strict=True):
                     picked = [names[r.material_id] for r in ranked]
                     counts[flip][0] += picked[0] == name
                     counts[flip][1] += name in picked
+                    if flip and mask.sum() >= 0.005 * mask.size:
+                        large[0] += picked[0] == name
+                        large[1] += name in picked
+                        large[2] += 1
                     if flip:
                         by_shape[truth.in_collection][0] += picked[0] == name
                         by_shape[truth.in_collection][1] += name in picked
@@ -68,6 +73,9 @@ def main() -> None:
     for flip, (top1, top5) in counts.items():
         print(f"exemplar ground-truth regions ({regions}), {'flip-averaged' if flip else 'single view'}: "
               f"top-1 {top1 / regions:.3f}, top-5 {top5 / regions:.3f}")
+    if large[2]:
+        print(f"  flip-averaged, regions of at least 0.5% of the image ({large[2]}): "
+              f"top-1 {large[0] / large[2]:.3f}, top-5 {large[1] / large[2]:.3f}")
     for in_collection, (top1, top5, n) in by_shape.items():
         if n:
             print(f"  flip-averaged, exemplars of {'collection' if in_collection else 'held-out'} shapes ({n}): "

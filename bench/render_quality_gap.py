@@ -20,7 +20,9 @@ with `--conditions` also
                        material (as products often are; its regions are unions of parts, so this
                        row is not paired with the others),
 and with `--heldout-envmaps DIR` (the demo's `groundtruth/envmaps`, the studios only exemplars are lit by)
-  - held-out studio:   the stored quality, lit by one of those envmaps instead (same scale and rotation).
+  - held-out studio:   the stored quality, lit by one of those envmaps instead (same scale and rotation),
+  - with `--conditions` also photo-like + degradation under such a studio (everything an exemplar has
+                       but its shape's material arrangement).
 
 Only validation renders (held-out shapes and envmaps) are used, never exemplars, so whatever this
 shows may be acted on without tuning on the test set. Prints a table and writes
@@ -200,6 +202,12 @@ def main() -> None:
                 own = regions(example.material_ids, known)
                 if own:
                     results.setdefault("held-out studio", []).extend(score(clf, example.srgb, own))
+                if args.conditions:  # both at once: imaged like an exemplar and lit by its studios
+                    rgb, ids = photo(renderer, inputs.mesh(spec.shape_id), spec, inputs.material_specs(spec), lit,
+                                     args.photo_size, args.photo_spp)
+                    own = regions(ids, known)
+                    if own:
+                        results.setdefault(f"{DEGRADED}, held-out studio", []).extend(score(clf, rgb, own))
     summary = {
         "classifier": {"id": row.id, "name": row.name, "metrics": {k: (row.metrics or {}).get(k)
                                                                    for k in ("mtl@1", "mtl@5")}},

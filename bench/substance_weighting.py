@@ -199,6 +199,16 @@ def main() -> None:
                             "sqrt(material head) x network x colour": (network, colour[1.0])}
                 # marginal-first: the substance with the most posterior mass, then its best material
                 subs_of = np.array(clf.material_substances)
+                # diagnostic: a part smaller than the classifier's smallest training region (0.5% of the
+                # image) is outside what the head was trained on; rank it without the head there
+                head = mat_probs[k:k + 1]
+                if mask.sum() < 0.005 * mask.size:
+                    head = np.full_like(head, 1.0)
+                scores = clf.scores(head, calibrated[None], colour[1.0])[0]
+                order = substance_first_order(scores, subs_of)[:5]
+                picked = [names[clf.materials[i]] for i in order]
+                hits["calibrated network + colour, substance first, no head below 0.5%"].append(
+                    (float(picked[0] == truth), float(truth in picked), float(subs_of[order[0]] == true_sub)))
                 for label, weights in (("network", network), ("calibrated network", calibrated)):
                     scores = clf.scores(mat_probs[k:k + 1], weights[None], colour[1.0])[0]
                     order = substance_first_order(scores, subs_of)[:5]

@@ -112,3 +112,48 @@ def test_a_part_too_small_to_classify_keeps_the_substance_the_network_saw(aligne
     assert unobserved  # still too small for the classifier, and marked so
     with session_scope() as session:
         assert session.get(m.Material, material).substance == "wood"  # not the fabric/leather prior
+
+
+def _untrained_classifier(store, material_ids: list[int], substances: list[str]) -> int:  # type: ignore[no-untyped-def]
+    """A material classifier row with random weights: enough to exercise inference's plumbing."""
+    import torch
+
+    from photoshape_flow.classify.checkpoint import make_checkpoint, slim, to_bytes
+    from photoshape_flow.classify.resnet import MaterialResNet
+
+    torch.manual_seed(0)
+    model = MaterialResNet("resnet18", num_materials=len(material_ids), width=8)
+    checkpoint = make_checkpoint(model, materials=material_ids, material_substances=substances, image_size=32,
+                                 config={}, epoch=1)
+    with session_scope() as session:
+        row = m.Classifier(name="untrained", kind="material", architecture="resnet18", materials=material_ids,
+                           config={"min_region_fraction": 0.005}, status="ok",
+                           checkpoint_blob=store.put_bytes(to_bytes(slim(checkpoint)), "pt"))
+        session.add(row)
+        session.flush()
+        return row.id
+
+
+def test_a_part_smaller_than_any_training_region_is_ranked_without_the_head(  # type: ignore[no-untyped-def]
+    aligned_pair: dict[str, int], store
+) -> None:
+    # shrink the legs to 4 x 5 pixels: still classified (>= 16 px) but under 0.5% of the 64 x 64 image
+    with session_scope() as session:
+        query = sa.select(m.Alignment).where(m.Alignment.pair_id == aligned_pair["pair"])
+        alignment = session.execute(query).scalar_one()
+        part_map = store.load_image(alignment.crf_blob).copy()
+        part_map[part_map == 2] = 0
+        part_map[40:44, 20:25] = 2
+        alignment.crf_blob = store.put_image(part_map)
+    names = ["red_leather", "blue_leather", "walnut", "grey_fabric"]
+    _untrained_classifier(store, [aligned_pair[n] for n in names], ["leather", "leather", "wood", "fabric"])
+    assert run_inference("classifier").pairs_done == 1
+    with session_scope() as session:
+        rows = session.execute(sa.select(m.Assignment).where(m.Assignment.method == "classifier",
+                                                             m.Assignment.rank == 1)).scalars().all()
+        by_part = {row.part_id: row for row in rows}
+    legs, seat = by_part[aligned_pair["legs"]], by_part[aligned_pair["seat"]]
+    assert legs.params.get("classifier_head") is False and not legs.unobserved
+    assert "classifier_head" not in seat.params
+    # without the (random) head, the substance network (wood 0.8) and the brown colour decide
+    assert legs.material_id == aligned_pair["walnut"]

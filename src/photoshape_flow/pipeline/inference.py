@@ -8,7 +8,9 @@ the method restricted to that substance, and their rows are marked `unobserved`.
 
 Methods (`assignment.method`): `classifier` (ours: material probability x calibrated substance
 confidence x colour likelihood, both fit on validation renders, the first material taken from the
-substance with the most of that score (inference-6); rows keyed `classifier:<id>` so a new
+substance with the most of that score (inference-6); a part smaller than the classifier's smallest
+training region is ranked without the material head, whose output there is not evidence
+(inference-7, params `classifier_head: false`); rows keyed `classifier:<id>` so a new
 classifier adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
 path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
 claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
@@ -57,8 +59,10 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-# 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs; 6 substance decided first
-CODE_VERSION = "inference-6"
+# 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs; 6 substance decided first;
+# 7 parts below the classifier's smallest training region are ranked without its head
+CODE_VERSION = "inference-7"
+DEFAULT_MIN_REGION_FRACTION = 0.005  # classify.configs.ClassifierConfig.min_region_fraction
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
@@ -79,6 +83,7 @@ class _PartInput:
     mask: np.ndarray | None  # None: unobserved
     substance: PartSubstanceView
     color: dict[int, float] | None = None  # material id -> colour likelihood, when the ranking used it
+    head: bool = True  # False: too small for the classifier's head, ranked without it
 
 
 @dataclass
@@ -173,6 +178,10 @@ class _Context:
             if settings.torch_threads:
                 torch.set_num_threads(settings.torch_threads)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
+        # the smallest region (share of the image) the classifier trained on: below it the head's
+        # output is not evidence (validation renders: top-1 0.08, substance of top-1 at chance)
+        self.min_region_fraction = float(((classifier.config or {}) if classifier else {}).get(
+            "min_region_fraction", DEFAULT_MIN_REGION_FRACTION))
         self.material_labs: dict[int, np.ndarray] = {}
         if method == "color-match":
             for mat in mats:
@@ -320,6 +329,10 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
     mat_probs, _ = batch[item.part.id]
     colors = None
     if item.mask is not None:
+        if item.mask.sum() < ctx.min_region_fraction * item.mask.size:
+            # smaller than any region the classifier trained on: ranked by the other evidence alone
+            mat_probs = np.ones_like(mat_probs)
+            item.head = False
         weights = ctx.substance_weights(sub)
         if ctx.color_sigma is not None and ctx.model_labs is not None:
             colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)[None]
@@ -399,7 +412,8 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
                     params={"part_substance": item.substance.substance,
                             "substance_confidence": item.substance.probs.get(item.substance.substance or "", None),
                             "uv": IDENTITY_UV,
-                            **({"color_likelihood": round(item.color[r.material_id], 6)} if item.color else {})},
+                            **({"color_likelihood": round(item.color[r.material_id], 6)} if item.color else {}),
+                            **({} if item.head else {"classifier_head": False})},
                     params_hash=params_hash,
                 ))
     session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair.id,
