@@ -62,7 +62,6 @@ ALIGNMENT_METHOD = "flow-crf"
 # 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs; 6 substance decided first;
 # 7 parts below the classifier's smallest training region are ranked without its head
 CODE_VERSION = "inference-7"
-DEFAULT_MIN_REGION_FRACTION = 0.005  # classify.configs.ClassifierConfig.min_region_fraction
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
@@ -168,6 +167,7 @@ class _Context:
         self.available_substances = {sub for _, sub in self.materials}
         self.classifier = classifier
         self.model = None
+        self.min_region_fraction = 0.0
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
@@ -178,10 +178,12 @@ class _Context:
             if settings.torch_threads:
                 torch.set_num_threads(settings.torch_threads)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
-        # the smallest region (share of the image) the classifier trained on: below it the head's
-        # output is not evidence (validation renders: top-1 0.08, substance of top-1 at chance)
-        self.min_region_fraction = float(((classifier.config or {}) if classifier else {}).get(
-            "min_region_fraction", DEFAULT_MIN_REGION_FRACTION))
+            from photoshape_flow.classify.configs import ClassifierConfig
+
+            # the smallest region (share of the image) the classifier trained on: below it the head's
+            # output is not evidence (validation renders: top-1 0.08, substance of top-1 at chance)
+            self.min_region_fraction = float((classifier.config or {}).get(
+                "min_region_fraction", ClassifierConfig.min_region_fraction))
         self.material_labs: dict[int, np.ndarray] = {}
         if method == "color-match":
             for mat in mats:
