@@ -194,6 +194,8 @@ def main() -> None:
             if heldout:
                 from photoshape_flow.render import EnvmapSpec
 
+                # the studios in turn, indexed by the regions scored so far (how the figures in
+                # docs/results.md were drawn; any spread over the few studios would do)
                 lit = EnvmapSpec(path=heldout[len(results.get("held-out studio", [])) % len(heldout)])
                 started = time.perf_counter()
                 example = render_training_example(renderer, inputs.mesh(spec.shape_id), spec,
