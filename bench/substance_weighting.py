@@ -16,7 +16,9 @@ material top-1/top-5 against the ground truth for
   - sqrt(material head) x network x colour: the material head tempered (T = 2), a diagnostic of
                       whether the material head is over-confident against the other two,
 and the substance accuracy of each ranking's top-1 material, next to the substance network's own
-argmax (what the no-classifier baseline picks). First, on the validation renders (where sigma and
+argmax (what the no-classifier baseline picks); on the exemplars also inference-7 and inference-8
+(below the classifier's smallest training region: no head, and for inference-8 the network's own
+substance), each split by part size. First, on the validation renders (where sigma and
 the temperature are fit, and where a ranking may be chosen without touching the exemplars): the
 rankings on the renders' exact material regions.
 Prints tables and writes bench/results/substance_weighting.json.
@@ -202,13 +204,25 @@ def main() -> None:
                 # diagnostic: a part smaller than the classifier's smallest training region (0.5% of the
                 # image) is outside what the head was trained on; rank it without the head there
                 head = mat_probs[k:k + 1]
-                if mask.sum() < 0.005 * mask.size:
+                small = bool(mask.sum() < 0.005 * mask.size)
+                if small:
                     head = np.full_like(head, 1.0)
                 scores = clf.scores(head, calibrated[None], colour[1.0])[0]
                 order = substance_first_order(scores, subs_of)[:5]
                 picked = [names[clf.materials[i]] for i in order]
                 hits["calibrated network + colour, substance first, no head below 0.5%"].append(
                     (float(picked[0] == truth), float(truth in picked), float(subs_of[order[0]] == true_sub)))
+                # inference-8: below 0.5% the substance network's own decision is the substance
+                order8 = substance_first_order(scores, subs_of, network_sub if small else None)[:5]
+                picked8 = [names[clf.materials[i]] for i in order8]
+                hit8 = (float(picked8[0] == truth), float(truth in picked8), float(subs_of[order8[0]] == true_sub))
+                hits["inference-8 (below 0.5%: no head, the network's substance)"].append(hit8)
+                size = "below 0.5%" if small else "0.5% and up"
+                hits[f"  inference-7, parts {size}"].append(hits[
+                    "calibrated network + colour, substance first, no head below 0.5%"][-1])
+                hits[f"  inference-8, parts {size}"].append(hit8)
+                hits[f"  network argmax, parts {size}"].append(
+                    (float("nan"), float("nan"), float(network_sub == true_sub)))
                 for label, weights in (("network", network), ("calibrated network", calibrated)):
                     scores = clf.scores(mat_probs[k:k + 1], weights[None], colour[1.0])[0]
                     order = substance_first_order(scores, subs_of)[:5]

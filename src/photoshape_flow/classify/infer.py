@@ -42,7 +42,7 @@ class Ranked:
     probability: float  # the material head's softmax probability
 
 
-def substance_first_order(scores: np.ndarray, substances: Sequence[str]) -> np.ndarray:
+def substance_first_order(scores: np.ndarray, substances: Sequence[str], substance: str | None = None) -> np.ndarray:
     """Material indices for one region, best first, deciding the substance before the material.
 
     The first material is the best-scoring one of the substance with the most ranking mass (the sum
@@ -51,7 +51,8 @@ def substance_first_order(scores: np.ndarray, substances: Sequence[str]) -> np.n
     substance's materials, not the substance of the single best material, which a cluster of
     similar materials of another substance can outvote by splitting the mass. Choosing the
     substance first is the Bayes decision for the substance and costs the material ranking nothing
-    measurable (docs/results.md, bench/substance_weighting.py).
+    measurable (docs/results.md, bench/substance_weighting.py). A given `substance` (one decided by
+    other evidence) is taken instead, when any of its materials has a positive score.
     """
     scores = np.asarray(scores, dtype=np.float64)
     labels = np.asarray(substances)
@@ -60,6 +61,8 @@ def substance_first_order(scores: np.ndarray, substances: Sequence[str]) -> np.n
         return order
     mass = {name: float(scores[labels == name].sum()) for name in dict.fromkeys(labels.tolist())}
     best = max(mass, key=lambda name: mass[name])  # ties: the first substance in material order
+    if substance is not None and mass.get(substance, 0.0) > 0.0:
+        best = substance
     first = next(int(i) for i in order if labels[i] == best)
     return np.concatenate([[first], order[order != first]]).astype(np.int64)
 
@@ -180,18 +183,21 @@ class MaterialClassifier:
         weight_by_substance: bool = True,
         color_weights: np.ndarray | None = None,
         substance_first: bool = False,
+        substances: Sequence[str | None] | None = None,
     ) -> list[list[Ranked]]:
         """The k best materials per region, best first.
 
         With `substance_first` the first material is chosen within the substance of most ranking
-        mass (`substance_first_order`; what inference and retrieval do), else by score alone.
+        mass (`substance_first_order`; what inference and retrieval do), or within the region's
+        entry of `substances` where that is given and not None, else by score alone.
         """
         scores = self.scores(material_probs, substance_probs if weight_by_substance else None, color_weights)
         probs = np.asarray(material_probs)[:, 1:]
         results = []
         for row in range(scores.shape[0]):
             if substance_first:
-                order = substance_first_order(scores[row], self.material_substances)[: max(0, k)]
+                decided = substances[row] if substances is not None else None
+                order = substance_first_order(scores[row], self.material_substances, decided)[: max(0, k)]
             else:
                 order = np.argsort(-scores[row], kind="stable")[: max(0, k)]
             results.append([
