@@ -80,6 +80,14 @@ def rankings(clf, probs: np.ndarray, calibrated: np.ndarray, colour: np.ndarray)
     }
 
 
+def _scores(hits: list[tuple[float, float, int]]) -> dict[str, float | int | None]:
+    """Regions, top-1, top-5 (None for a substance-only row, whose material columns are NaN), substance."""
+    top1, top5, substance = (np.array(column, dtype=np.float64) for column in zip(*hits, strict=True))
+    material = not np.isnan(top1).all()
+    return {"regions": len(hits), "top1": float(top1.mean()) if material else None,
+            "top5": float(top5.mean()) if material else None, "substance": float(substance.mean())}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=200, help="validation renders to re-image")
@@ -95,7 +103,8 @@ def main() -> None:
     subs = np.array(clf.material_substances)
     renderer = Renderer(resolve=store.resolve)
     inputs = _Inputs(store=store)
-    hits: dict[str, dict[str, list[tuple[int, int, int]]]] = {"stored": defaultdict(list), "photo": defaultdict(list)}
+    hits: dict[str, dict[str, list[tuple[float, float, int]]]] = {
+        "stored": defaultdict(list), "photo": defaultdict(list)}
     with session_scope() as session:
         materials = session.execute(sa.select(m.Material)).scalars().all()
         mat_labs = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
@@ -117,7 +126,8 @@ def main() -> None:
         material_substance = {mat.id: mat.substance for mat in materials}
         for rendering in picked:
             params = dict(rendering.params)
-            params.pop("size"), params.pop("spp")
+            for key in ("size", "spp"):  # rendering settings, not part of the spec
+                params.pop(key)
             spec = RenderSpec.from_dict(params)
             inputs.load(session, spec)
             stored_ids = load_label_map(store.path(rendering.blobs["material_ids"]))
@@ -138,19 +148,18 @@ def main() -> None:
                     truth, true_sub = index[mid], material_substance[mid]
                     calibrated = substance_vector(temper(part.probs, temperature))
                     colour = color_likelihood(median_lab(rgb, mask), labs, sigma)
-                    hits[name]["network argmax"].append((-1, -1, int(part.substance == true_sub)))
+                    hits[name]["network argmax"].append((float("nan"), float("nan"), int(part.substance == true_sub)))
                     for ranking, order in rankings(clf, probs[k, :], calibrated, colour).items():
                         hits[name][ranking].append((int(order[0] == truth), int(truth in order),
                                                     int(subs[order[0]] == true_sub)))
-    summary = {name: {r: {"regions": len(v), "top1": float(np.mean([h[0] for h in v])),
-                          "top5": float(np.mean([h[1] for h in v])), "substance": float(np.mean([h[2] for h in v]))}
-                      for r, v in table.items()} for name, table in hits.items()}
+    summary = {name: {r: _scores(v) for r, v in table.items()} for name, table in hits.items()}
     print(f"classifier {row.name}, substance network {newest} (T {temperature}), colour sigma {sigma:.2f}, "
           f"{len(picked)} validation renders")
     print("| version | ranking | regions | top-1 | top-5 | substance |\n|---|---|---:|---:|---:|---:|")
     for name, table in summary.items():
         for r, s in table.items():
-            print(f"| {name} | {r} | {s['regions']} | {s['top1']:.3f} | {s['top5']:.3f} | {s['substance']:.3f} |")
+            top = " | ".join("—" if s[k] is None else f"{s[k]:.3f}" for k in ("top1", "top5"))
+            print(f"| {name} | {r} | {s['regions']} | {top} | {s['substance']:.3f} |")
     out = Path(__file__).parent / "results" / "photo_validation.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"classifier": row.name, "substance_network": newest, "color_sigma": sigma,

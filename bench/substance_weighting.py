@@ -210,16 +210,15 @@ def main() -> None:
                 scores = clf.scores(head, calibrated[None], colour[1.0])[0]
                 order = substance_first_order(scores, subs_of)[:5]
                 picked = [names[clf.materials[i]] for i in order]
-                hits["calibrated network + colour, substance first, no head below 0.5%"].append(
-                    (float(picked[0] == truth), float(truth in picked), float(subs_of[order[0]] == true_sub)))
+                hit7 = (float(picked[0] == truth), float(truth in picked), float(subs_of[order[0]] == true_sub))
+                hits["calibrated network + colour, substance first, no head below 0.5%"].append(hit7)
                 # inference-8: below 0.5% the substance network's own decision is the substance
                 order8 = substance_first_order(scores, subs_of, network_sub if small else None)[:5]
                 picked8 = [names[clf.materials[i]] for i in order8]
                 hit8 = (float(picked8[0] == truth), float(truth in picked8), float(subs_of[order8[0]] == true_sub))
                 hits["inference-8 (below 0.5%: no head, the network's substance)"].append(hit8)
                 size = "below 0.5%" if small else "0.5% and up"
-                hits[f"  inference-7, parts {size}"].append(hits[
-                    "calibrated network + colour, substance first, no head below 0.5%"][-1])
+                hits[f"  inference-7, parts {size}"].append(hit7)
                 hits[f"  inference-8, parts {size}"].append(hit8)
                 hits[f"  network argmax, parts {size}"].append(
                     (float("nan"), float("nan"), float(network_sub == true_sub)))
