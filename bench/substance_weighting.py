@@ -16,9 +16,9 @@ material top-1/top-5 against the ground truth for
   - sqrt(material head) x network x colour: the material head tempered (T = 2), a diagnostic of
                       whether the material head is over-confident against the other two,
 and the substance accuracy of each ranking's top-1 material, next to the substance network's own
-argmax (what the no-classifier baseline picks); on the exemplars also inference-7 and inference-8 (tried, not adopted)
-(below the classifier's smallest training region: no head, and for inference-8 the network's own
-substance), each split by part size. First, on the validation renders (where sigma and
+argmax (what the no-classifier baseline picks); on the exemplars also inference-7 and inference-8
+(the pipeline since session 9; below the classifier's smallest training region: no head, and for
+inference-8 the network's own substance), each split by part size. First, on the validation renders (where sigma and
 the temperature are fit, and where a ranking may be chosen without touching the exemplars): the
 rankings on the renders' exact material regions.
 Prints tables and writes bench/results/substance_weighting.json.

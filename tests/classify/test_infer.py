@@ -138,3 +138,5 @@ def test_substance_first_takes_the_substance_with_most_mass_then_its_best_materi
     assert list(substance_first_order(scores, labels, "fabric")) == [1, 0, 2]
     assert list(substance_first_order(scores, labels, "metal")) == [0, 1, 2]  # no such material: mass decides
     assert list(substance_first_order(np.array([0.6, 0.0, 0.4]), labels, "fabric")) == [0, 2, 1]
+    assert [r.material_id for r in classifier.top_k(material, None, k=3, weight_by_substance=False,
+                                                    substance_first=True, substances=["fabric"])[0]] == [9, 4, 12]

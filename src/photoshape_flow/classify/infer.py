@@ -52,8 +52,7 @@ def substance_first_order(scores: np.ndarray, substances: Sequence[str], substan
     similar materials of another substance can outvote by splitting the mass. Choosing the
     substance first is the Bayes decision for the substance and costs the material ranking nothing
     measurable (docs/results.md, bench/substance_weighting.py). A given `substance` (one decided by
-    other evidence; bench/substance_weighting.py tries the substance network's for small parts) is
-    taken instead, when any of its materials has a positive score.
+    other evidence) is taken instead, when any of its materials has a positive score.
     """
     scores = np.asarray(scores, dtype=np.float64)
     labels = np.asarray(substances)
@@ -184,18 +183,21 @@ class MaterialClassifier:
         weight_by_substance: bool = True,
         color_weights: np.ndarray | None = None,
         substance_first: bool = False,
+        substances: Sequence[str | None] | None = None,
     ) -> list[list[Ranked]]:
         """The k best materials per region, best first.
 
         With `substance_first` the first material is chosen within the substance of most ranking
-        mass (`substance_first_order`; what inference and retrieval do), else by score alone.
+        mass (`substance_first_order`; what inference and retrieval do), or within the region's
+        entry of `substances` where that is given and not None, else by score alone.
         """
         scores = self.scores(material_probs, substance_probs if weight_by_substance else None, color_weights)
         probs = np.asarray(material_probs)[:, 1:]
         results = []
         for row in range(scores.shape[0]):
             if substance_first:
-                order = substance_first_order(scores[row], self.material_substances)[: max(0, k)]
+                decided = substances[row] if substances is not None else None
+                order = substance_first_order(scores[row], self.material_substances, decided)[: max(0, k)]
             else:
                 order = np.argsort(-scores[row], kind="stable")[: max(0, k)]
             results.append([

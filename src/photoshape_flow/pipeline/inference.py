@@ -10,7 +10,9 @@ Methods (`assignment.method`): `classifier` (ours: material probability x calibr
 confidence x colour likelihood, both fit on validation renders, the first material taken from the
 substance with the most of that score (inference-6); a part smaller than the classifier's smallest
 training region is ranked without the material head, whose output there is not evidence
-(inference-7, params `classifier_head: false`); rows keyed `classifier:<id>` so a new
+(inference-7, params `classifier_head: false`), and takes the substance network's decision as its
+substance (inference-8, chosen on aligned validation renders: bench/aligned_validation.py); rows
+keyed `classifier:<id>` so a new
 classifier adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
 path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
 claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
@@ -60,8 +62,9 @@ log = logging.getLogger(__name__)
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
 # 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs; 6 substance decided first;
-# 7 parts below the classifier's smallest training region are ranked without its head
-CODE_VERSION = "inference-7"
+# 7 parts below the classifier's smallest training region are ranked without its head; 8 and their
+# substance is the substance network's decision
+CODE_VERSION = "inference-8"
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
@@ -330,11 +333,14 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
     assert ctx.model is not None
     mat_probs, _ = batch[item.part.id]
     colors = None
+    decided: str | None = None
     if item.mask is not None:
         if item.mask.sum() < ctx.min_region_fraction * item.mask.size:
-            # smaller than any region the classifier trained on: ranked by the other evidence alone
+            # smaller than any region the classifier trained on (and the colour likelihood was fit on):
+            # the substance network, trained per pixel, decides the substance; colour orders materials
             mat_probs = np.ones_like(mat_probs)
             item.head = False
+            decided = sub.substance
         weights = ctx.substance_weights(sub)
         if ctx.color_sigma is not None and ctx.model_labs is not None:
             colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)[None]
@@ -346,7 +352,7 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
     allowed = np.array([[1.0 if mid in enabled else 0.0 for mid in ctx.model.materials]])
     colors = allowed if colors is None else colors * allowed
     ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials), color_weights=colors,
-                             substance_first=True)[0]
+                             substance_first=True, substances=[decided])[0]
     kept = [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked if r.material_id in enabled]
     return kept[: ctx.top_k]
 
