@@ -9,16 +9,19 @@ demo ours trailed the substance network's argmax on aligned parts smaller than t
 smallest training region (docs/results.md); this bench builds the same situation without touching
 the exemplars. Each validation render (held-out shapes and envmaps) is re-rendered at photo size,
 imaged like a demo photo (`demo.exemplars.degrade`, JPEG), square-cropped like a stored exemplar, and
-aligned to its own shape by the pipeline's code: the nearest view of the shape's stored HOG sweep
-(the coarse step restricted to the right shape), `align.partmap.render_coarse_part_map`, then
-`align.fine.align_pair` at the profile's working size. Every aligned part is then scored as inference
-scores it (the same thresholds, the substance network over the aligned map at the working size, the
-classifier and the colour of the aligned mask at the image size), against the majority material
-under the aligned mask (as `photoshape eval` does).
+aligned by the pipeline's code to each of the profile's `exemplar_topk` nearest shapes of the whole
+collection (each shape's best view of its stored HOG sweep: the coarse step's reverse index, so most
+pairs are other shapes than the rendered one, as on the exemplars), the coarse part map at that
+view (`align.partmap.render_coarse_part_map`), then `align.fine.align_pair` at the profile's working
+size. Every aligned part is then scored as inference scores it (the same thresholds, the substance
+network over the aligned map at the working size, the classifier and the colour of the aligned
+mask at the image size), against the majority material under the aligned mask (as `photoshape
+eval` does).
 
 Rankings, split by the aligned part's share of the image (< / >= the classifier's
 `min_region_fraction`):
-  - network argmax: the substance network's substance (the no-classifier baseline's pick),
+  - network argmax: the substance network's decision for the part, `PartSubstance.substance`, a
+                    per-pixel vote (the no-classifier baseline's pick),
   - inference-7:    head x calibrated network x colour, substance first; no head below the classifier's
                     smallest region (the pipeline until session 9),
   - network decides small parts: inference-7, but below that size the network's substance is taken
@@ -27,8 +30,9 @@ Rankings, split by the aligned part's share of the image (< / >= the classifier'
   - no colour for small parts: below that size the calibrated network alone (the colour likelihood
                     dropped: the argmax of the part's mean probabilities, not the network's
                     per-pixel vote that `PartSubstance.substance` records),
-and, with `--fit`, the colour sigma and substance temperature re-fit on the aligned regions of
-the even-numbered renders and scored on the odd ones.
+and inference-7 with the colour sigma and substance temperature re-fit on the aligned regions of
+the even-numbered renders, scored on the odd ones; and, for the small parts, the paired counts of
+parts only one of two rankings gets right.
 
 Writes bench/results/aligned_validation.json (per-part records too, so other rankings can be scored
 without re-rendering).
