@@ -53,44 +53,24 @@ import numpy as np
 import sqlalchemy as sa
 
 from photoshape_flow.classify.assignment import median_lab, substance_vector
-from photoshape_flow.classify.color_prior import (
-    color_likelihood,
-    fit_color_sigma,
-    material_lab_matrix,
-    region_color_distances,
-)
+from photoshape_flow.classify.color_prior import color_likelihood, fit_color_sigma
 from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.infer import substance_first_order
 from photoshape_flow.classify.substance_calibration import fit_temperature, temper
 from photoshape_flow.classify.substance_parts import part_substances
-from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model, predict_substances
+from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
-from photoshape_flow.pipeline.substances import _resize_probs, substance_temperature
-from photoshape_flow.pipeline.training import load_material_classifier, training_data
+from photoshape_flow.pipeline.substances import _resize_probs
+from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.pipeline.training_renders import _Inputs
 from photoshape_flow.store import BlobStore
-from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCES
 
-
-def imaged(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: int, spp: int):
-    """(sRGB uint8, part-ID map, foreground) of `spec` imaged like a demo exemplar photo."""
-    import cv2
-
-    from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
-    from photoshape_flow.synth.example import build_scene_inputs
-
-    camera, materials, uv_transforms, envmap = build_scene_inputs(mesh, spec, material_specs, envmap_spec)
-    result = renderer.beauty(mesh, materials, camera, envmap, size=size, spp=spp, uv_transforms=uv_transforms,
-                             background="transparent", seed=int(spec.seed % (2**31 - 1)))
-    params = sample_degradation(np.random.default_rng(spec.seed % 2**32))
-    jpeg = encode_jpeg(degrade(result.hdr, result.alpha, params), params["jpeg_quality"])
-    rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-    part_ids = np.asarray(renderer.part_ids(mesh, camera, size=size)).astype(np.int32)
-    return rgb, part_ids, np.asarray(result.alpha) >= 0.5
+sys.path.insert(0, str(Path(__file__).parent))
+from ranking_evidence import load_evidence, validation_specs
+from render_quality_gap import photo_with_parts
 
 
 def as_exemplar(rgb: np.ndarray, part_ids: np.ndarray, fg: np.ndarray):
@@ -165,18 +145,9 @@ def main() -> None:
     accuracies: list[float] = []
     start = time.perf_counter()
     with session_scope() as session:
-        materials = session.execute(sa.select(m.Material)).scalars().all()
-        material_substance = {mat.id: mat.substance for mat in materials}
-        mat_labs = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
-        labs = material_lab_matrix(clf.materials, mat_labs)
-        data = training_data(session, store)
-        sigma = fit_color_sigma(region_color_distances(data.val, mat_labs, limit=COLOR_SIGMA_RENDERS))
-        networks = session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars().all()
-        newest = max(n for n in networks if n is not None)
-        temperature = substance_temperature(settings, newest)
-        net_row = session.get(m.Classifier, newest)
-        network = load_model(checkpoint_from_bytes(store.read_bytes(net_row.checkpoint_blob)))
-        net_size = int(net_row.config.get("size") or 128)
+        ev = load_evidence(session, store, settings, clf.materials)
+        material_substance, labs, sigma, temperature = ev.material_substance, ev.labs, ev.sigma, ev.temperature
+        network, net_size, newest = ev.network, ev.net_size, ev.network_id
         cameras, hog, shape_of_row, blocks = None, None, [], []
         for feature in session.execute(sa.select(m.ViewFeature).where(m.ViewFeature.status == "ok")
                                        .order_by(m.ViewFeature.shape_id)).scalars():
@@ -188,20 +159,13 @@ def main() -> None:
         feats, shape_of_row = np.concatenate(blocks), np.asarray(shape_of_row)
         feat_norms = (feats**2).sum(axis=1)
         topk = PROFILES[args.profile].exemplar_topk
-        rows = session.execute(
-            sa.select(m.Rendering).where(m.Rendering.kind == "training", m.Rendering.split == "val",
-                                         m.Rendering.status == "ok").order_by(m.Rendering.key)
-        ).scalars().all()
-        step = max(1, len(rows) // max(1, args.count))
-        picked = rows[::step][: args.count]
-        for number, rendering in enumerate(picked):
-            params = dict(rendering.params)
-            for key in ("size", "spp"):  # rendering settings, not part of the spec
-                params.pop(key)
-            spec = RenderSpec.from_dict(params)
+        picked = validation_specs(session, args.count)
+        for number, (_, spec) in enumerate(picked):
             inputs.load(session, spec)
-            rgb, part_ids, fg = imaged(renderer, inputs.mesh(spec.shape_id), spec, inputs.material_specs(spec),
-                                       inputs.envmap_spec(spec.envmap.envmap_id), args.photo_size, args.photo_spp)
+            rgb, part_ids, fg = photo_with_parts(
+                renderer, inputs.mesh(spec.shape_id), spec, inputs.material_specs(spec),
+                inputs.envmap_spec(spec.envmap.envmap_id), args.photo_size, args.photo_spp)
+            part_ids = part_ids.astype(np.int32)
             crop = as_exemplar(rgb, part_ids, fg)
             if crop is None:
                 continue

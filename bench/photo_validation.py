@@ -32,31 +32,24 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-import sqlalchemy as sa
 
 from photoshape_flow.classify.assignment import median_lab, substance_vector
 from photoshape_flow.classify.color_prior import (
     color_likelihood,
-    fit_color_sigma,
-    material_lab_matrix,
-    region_color_distances,
 )
 from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.infer import substance_first_order
 from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.classify.substance_parts import part_substances
-from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model, predict_substances
+from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
-from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
-from photoshape_flow.pipeline.substances import substance_temperature
-from photoshape_flow.pipeline.training import load_material_classifier, training_data
+from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.pipeline.training_renders import _Inputs
 from photoshape_flow.store import BlobStore
-from photoshape_flow.synth.spec import RenderSpec
 
 sys.path.insert(0, str(Path(__file__).parent))
+from ranking_evidence import load_evidence, validation_specs
 from render_quality_gap import photo, regions
 
 
@@ -106,29 +99,11 @@ def main() -> None:
     hits: dict[str, dict[str, list[tuple[float, float, int]]]] = {
         "stored": defaultdict(list), "photo": defaultdict(list)}
     with session_scope() as session:
-        materials = session.execute(sa.select(m.Material)).scalars().all()
-        mat_labs = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
-        labs = material_lab_matrix(clf.materials, mat_labs)
-        data = training_data(session, store)
-        sigma = fit_color_sigma(region_color_distances(data.val, mat_labs, limit=COLOR_SIGMA_RENDERS))
-        networks = session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars().all()
-        newest = max(n for n in networks if n is not None)
-        temperature = substance_temperature(settings, newest)
-        net_row = session.get(m.Classifier, newest)
-        network = load_model(checkpoint_from_bytes(store.read_bytes(net_row.checkpoint_blob)))
-        net_size = int(net_row.config.get("size") or 128)
-        rows = session.execute(
-            sa.select(m.Rendering).where(m.Rendering.kind == "training", m.Rendering.split == "val",
-                                         m.Rendering.status == "ok").order_by(m.Rendering.key)
-        ).scalars().all()
-        step = max(1, len(rows) // max(1, args.count))
-        picked = rows[::step][: args.count]
-        material_substance = {mat.id: mat.substance for mat in materials}
-        for rendering in picked:
-            params = dict(rendering.params)
-            for key in ("size", "spp"):  # rendering settings, not part of the spec
-                params.pop(key)
-            spec = RenderSpec.from_dict(params)
+        ev = load_evidence(session, store, settings, clf.materials)
+        labs, sigma, temperature, newest = ev.labs, ev.sigma, ev.temperature, ev.network_id
+        network, net_size, material_substance = ev.network, ev.net_size, ev.material_substance
+        picked = validation_specs(session, args.count)
+        for rendering, spec in picked:
             inputs.load(session, spec)
             stored_ids = load_label_map(store.path(rendering.blobs["material_ids"]))
             found = regions(stored_ids, set(index))

@@ -91,13 +91,14 @@ def shared(spec: RenderSpec) -> RenderSpec:
     return dataclasses.replace(spec, parts=parts)
 
 
-def photo(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: int, spp: int):
-    """(sRGB uint8, material-id map) of `spec` imaged like a demo exemplar: rendered on transparent at
-    photo size, then the demo's photo degradation (exposure, white balance, blur, noise) and JPEG."""
+def photo_with_parts(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: int, spp: int):
+    """(sRGB uint8, part-ID map, foreground) of `spec` imaged like a demo exemplar: rendered on
+    transparent at photo size, then the demo's photo degradation (exposure, white balance, blur,
+    noise) and JPEG."""
     import cv2
 
     from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
-    from photoshape_flow.synth.example import build_scene_inputs, label_maps
+    from photoshape_flow.synth.example import build_scene_inputs
 
     camera, materials, uv_transforms, envmap = build_scene_inputs(mesh, spec, material_specs, envmap_spec)
     result = renderer.beauty(mesh, materials, camera, envmap, size=size, spp=spp, uv_transforms=uv_transforms,
@@ -105,7 +106,16 @@ def photo(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: i
     params = sample_degradation(np.random.default_rng(spec.seed % 2**32))
     jpeg = encode_jpeg(degrade(result.hdr, result.alpha, params), params["jpeg_quality"])
     rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-    material_ids, _ = label_maps(np.asarray(renderer.part_ids(mesh, camera, size=size)), spec)
+    part_ids = np.asarray(renderer.part_ids(mesh, camera, size=size))
+    return rgb, part_ids, np.asarray(result.alpha) >= 0.5
+
+
+def photo(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: int, spp: int):
+    """(sRGB uint8, material-id map) of `spec` imaged like a demo exemplar (`photo_with_parts`)."""
+    from photoshape_flow.synth.example import label_maps
+
+    rgb, part_ids, _ = photo_with_parts(renderer, mesh, spec, material_specs, envmap_spec, size, spp)
+    material_ids, _ = label_maps(part_ids, spec)
     return rgb, material_ids
 
 
