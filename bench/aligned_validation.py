@@ -158,6 +158,7 @@ def main() -> None:
             shape_of_row += [feature.shape_id] * len(blocks[-1])
         feats, shape_of_row = np.concatenate(blocks), np.asarray(shape_of_row)
         feat_norms = (feats**2).sum(axis=1)
+        first_row = {int(sid): int(i) for i, sid in reversed(list(enumerate(shape_of_row)))}  # a shape's view 0
         topk = PROFILES[args.profile].exemplar_topk
         picked = validation_specs(session, args.count)
         for number, (_, spec) in enumerate(picked):
@@ -188,8 +189,7 @@ def main() -> None:
             for shape_id, row_index in best_view.items():
                 if shape_id not in inputs.shapes:
                     inputs.shapes[shape_id] = session.get(m.Shape, shape_id)
-                views_first = int(np.flatnonzero(shape_of_row == shape_id)[0])
-                camera = cameras[row_index - views_first]
+                camera = cameras[row_index - first_row[shape_id]]
                 try:
                     coarse = render_coarse_part_map(renderer, inputs.mesh(shape_id), camera, fine.size,
                                                     target_box=square_box(fg_small))
