@@ -206,7 +206,7 @@ def main() -> None:
                     continue
                 net_parts = part_substances(aligned, net_probs, indices)  # substances stage: working size
                 masks = [part_map == i for i in indices]
-                head, _ = clf.predict(rgb, masks)
+                head, head_substance = clf.predict(rgb, masks)
                 for k, (mask, net) in enumerate(zip(masks, net_parts, strict=True)):
                     values = truth_map[mask]
                     if not net.observed or (values > 0).sum() < 0.5 * values.size:
@@ -220,7 +220,8 @@ def main() -> None:
                         "small": bool(mask.sum() < min_fraction * mask.size),
                         "truth": index[truth], "true_substance": material_substance[truth],
                         "network": net.substance, "network_probs": [net.probs[s] for s in SUBSTANCES],
-                        "head": head[k].tolist(), "lab": None if lab is None else np.asarray(lab).tolist(),
+                        "head": head[k].tolist(), "head_substance": head_substance[k].tolist(),
+                        "lab": None if lab is None else np.asarray(lab).tolist(),
                     })
             if number % 25 == 0:
                 print(f"{number + 1}/{len(picked)} renders, {len(records)} parts, "
