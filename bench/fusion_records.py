@@ -34,14 +34,14 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
-from photoshape_flow.pipeline.evaluate import _exemplar_truths, _majority, _part_map, truth_labels
+from photoshape_flow.pipeline.evaluate import _majority
 from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ranking_evidence import load_evidence
+from ranking_evidence import exemplar_pairs, load_evidence
 
 
 def _lab(rgb: np.ndarray, mask: np.ndarray) -> list[float] | None:
@@ -85,45 +85,31 @@ def main() -> None:
                     "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
                     "lab": _lab(rgb, mask),
                 })
-        truths = _exemplar_truths(session, gt, None)
-        pairs = session.execute(
-            sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
-            .where(m.Alignment.status == "ok", m.Alignment.method == "flow-crf",
-                   m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
-            .order_by(m.Pair.id)
-        ).all()
         names = {mat.id: mat.name for mat in session.execute(sa.select(m.Material)).scalars()}
         by_name = {name: mid for mid, name in names.items()}
-        for pair, alignment in pairs:
-            exemplar = session.get(m.Exemplar, pair.exemplar_id)
-            labels, mats, true_subs = truth_labels(truths[exemplar.id], exemplar)
-            part_map = _part_map(store, alignment, labels.shape[0])
-            image = store.load_image(exemplar.image_blob)[..., :3]
-            subs = {ps.part_id: ps for ps in session.execute(
-                sa.select(m.PartSubstance).where(m.PartSubstance.pair_id == pair.id)).scalars()}
-            parts = session.execute(sa.select(m.Part).where(m.Part.shape_id == pair.shape_id)).scalars().all()
-            min_pixels = max(16, int(0.0005 * part_map.size))
+        for ep in exemplar_pairs(session, store, gt):
+            min_pixels = max(16, int(0.0005 * ep.part_map.size))
             items = []
-            for part in parts:
-                mask = part_map == part.index
-                winner = _majority(labels, mask)
-                ps = subs.get(part.id)
+            for part in ep.parts:
+                mask = ep.part_map == part.index
+                winner = _majority(ep.labels, mask)
+                ps = ep.part_substances.get(part.id)
                 if winner is None or mask.sum() < min_pixels or ps is None or not ps.observed or not ps.substance:
                     continue
-                truth = by_name.get(mats[winner - 1])
+                truth = by_name.get(ep.materials[winner - 1])
                 if truth not in index:
                     continue
-                items.append((part, mask, ps, index[truth], true_subs[winner - 1]))
+                items.append((part, mask, ps, index[truth], ep.substances[winner - 1]))
             if not items:
                 continue
-            mat, sub = clf.predict(image, [i[1] for i in items])
+            mat, sub = clf.predict(ep.image, [i[1] for i in items])
             for k, (part, mask, ps, truth, true_sub) in enumerate(items):
                 exemplars.append({
-                    "pair": pair.id, "exemplar": exemplar.id, "part": part.id, "own_shape": None,
+                    "pair": ep.pair.id, "exemplar": ep.exemplar.id, "part": part.id,
                     "fraction": float(mask.mean()), "truth": truth, "true_substance": true_sub,
                     "network": ps.substance, "network_probs": [float((ps.probs or {}).get(s, 0.0)) for s in SUBSTANCES],
                     "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
-                    "lab": _lab(image, mask),
+                    "lab": _lab(ep.image, mask),
                 })
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({

@@ -7,6 +7,7 @@ substance network (its part-level temperature) and the material colours that inf
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +19,7 @@ from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_m
 from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
+from photoshape_flow.pipeline.evaluate import _exemplar_truths, _part_map, truth_labels
 from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
 from photoshape_flow.pipeline.substances import substance_temperature
 from photoshape_flow.pipeline.training import training_data
@@ -68,3 +70,40 @@ def validation_specs(session: Session, count: int) -> list[tuple[m.Rendering, Re
             params.pop(key)
         out.append((rendering, RenderSpec.from_dict(params)))
     return out
+
+
+@dataclass
+class ExemplarPair:
+    """One aligned pair with demo ground truth, loaded as the accuracy benches score it."""
+
+    pair: m.Pair
+    exemplar: m.Exemplar
+    labels: np.ndarray  # ground-truth label per pixel of the stored exemplar (0: background)
+    materials: list[str]  # material name of label i + 1
+    substances: list[str]  # substance of label i + 1
+    part_map: np.ndarray  # the aligned (CRF) part map at the exemplar's size
+    image: np.ndarray  # the exemplar's RGB
+    part_substances: dict[int, m.PartSubstance]  # part id -> its row for this pair
+    parts: list[m.Part]
+
+
+def exemplar_pairs(session: Session, store: BlobStore, gt: Any) -> Iterator[ExemplarPair]:
+    """Every aligned (flow-crf), non-excluded pair whose exemplar has ground truth, in pair order."""
+    truths = _exemplar_truths(session, gt, None)
+    rows = session.execute(
+        sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
+        .where(m.Alignment.status == "ok", m.Alignment.method == "flow-crf",
+               m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
+        .order_by(m.Pair.id)
+    ).all()
+    for pair, alignment in rows:
+        exemplar = session.get(m.Exemplar, pair.exemplar_id)
+        labels, materials, substances = truth_labels(truths[exemplar.id], exemplar)
+        yield ExemplarPair(
+            pair=pair, exemplar=exemplar, labels=labels, materials=materials, substances=substances,
+            part_map=_part_map(store, alignment, labels.shape[0]),
+            image=store.load_image(exemplar.image_blob)[..., :3],
+            part_substances={ps.part_id: ps for ps in session.execute(
+                sa.select(m.PartSubstance).where(m.PartSubstance.pair_id == pair.id)).scalars()},
+            parts=list(session.execute(sa.select(m.Part).where(m.Part.shape_id == pair.shape_id)).scalars()),
+        )

@@ -51,11 +51,14 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
-from photoshape_flow.pipeline.evaluate import _exemplar_truths, _majority, _part_map, truth_labels
+from photoshape_flow.pipeline.evaluate import _majority
 from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
 from photoshape_flow.pipeline.substances import substance_temperature
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
+
+sys.path.insert(0, str(Path(__file__).parent))
+from ranking_evidence import exemplar_pairs
 
 
 def _summary(hits: dict[str, list[tuple[float, float, float]]]) -> dict[str, dict[str, float]]:
@@ -158,19 +161,9 @@ def main() -> None:
         val = validation_renders(clf, data, labs, sigma, (network, int(net_row.config.get("size") or 128)),
                                  temperatures[newest], {mat.id: mat.substance for mat in materials})
         _print("validation renders, exact material regions", val)
-        truths = _exemplar_truths(session, gt, None)
-        pairs = session.execute(
-            sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
-            .where(m.Alignment.status == "ok", m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
-        ).all()
-        for pair, alignment in pairs:
-            exemplar = session.get(m.Exemplar, pair.exemplar_id)
-            labels, mats, true_subs = truth_labels(truths[exemplar.id], exemplar)
-            part_map = _part_map(store, alignment, labels.shape[0])
-            image = store.load_image(exemplar.image_blob)[..., :3]
-            subs = {ps.part_id: ps for ps in session.execute(
-                sa.select(m.PartSubstance).where(m.PartSubstance.pair_id == pair.id)).scalars()}
-            parts = session.execute(sa.select(m.Part).where(m.Part.shape_id == pair.shape_id)).scalars().all()
+        for ep in exemplar_pairs(session, store, gt):
+            labels, mats, true_subs, part_map = ep.labels, ep.materials, ep.substances, ep.part_map
+            image, subs, parts = ep.image, ep.part_substances, ep.parts
             items = []
             for part in parts:
                 mask = part_map == part.index
