@@ -11,7 +11,7 @@ the region's share of the image, and the truth (material index in the classifier
     `photoshape eval` scores them (majority ground-truth label under the aligned mask).
 
 Any ranking can then be scored from the JSON without re-running a network:
-bench/fusion_rules.py does that. Nothing here is fit or chosen.
+bench/substance_ceiling.py does that. Nothing here is fit or chosen.
 
     PHOTOSHAPE_DATA_ROOT=... python bench/fusion_records.py [groundtruth.json] [--out FILE]
 """

@@ -16,16 +16,24 @@ measures that directly from `bench/fusion_records.py`'s records, with no network
     fit where they are scored leave the pool at the network's accuracy, no re-weighting of this
     evidence will beat the network there (a maximum-likelihood fit, not a strict accuracy bound).
 
-Parts below the classifier's smallest training region keep the network's decision (inference-8).
-Prints a table and writes bench/results/substance_ceiling.json.
+Also scored: ours with the material head divided by the training renders' substance prior (their
+substances follow the network's decisions, so the head's prior echoes the network's; the frequency
+is read from the validation regions, which share the training renders' distribution), and each
+decision's recall per true substance. With `--aligned` (bench/aligned_validation.py's JSON, which
+records the same evidence) every row is scored on the aligned validation renders too.
 
-    python bench/substance_ceiling.py bench/results/fusion_records.json
+Parts below the classifier's smallest training region keep the network's decision (inference-8).
+Prints tables and writes bench/results/substance_ceiling.json.
+
+    python bench/substance_ceiling.py bench/results/fusion_records.json \
+        [--aligned bench/results/aligned_validation.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +43,6 @@ from photoshape_flow.classify.color_prior import color_likelihood
 from photoshape_flow.classify.infer import substance_first_order
 from photoshape_flow.vocab import SUBSTANCES
 
-FEATURES = ("network", "head", "colour", "substance head")
 POOLS = {"N + H": (0, 1), "N + H + C": (0, 1, 2), "N + S": (0, 3), "N + H + C + S": (0, 1, 2, 3)}
 
 
@@ -80,9 +87,22 @@ def accuracy(regions: list[Region], decide) -> float:
     return float(np.mean([decide(r) == r.truth for r in regions])) if regions else float("nan")
 
 
+def agree(regions: list[Region], member: np.ndarray) -> dict[str, float]:
+    """How often the network's decision and the material head's substance agree, and who is right when not."""
+    net = np.array([r.net for r in regions])
+    head = np.array([int(np.argmax(member @ r.h)) for r in regions])
+    truth = np.array([r.truth for r in regions])
+    differ = net != head
+    return {"parts": len(regions), "agree": float(np.mean(~differ)),
+            "accuracy_when_agree": float(np.mean((net == truth)[~differ])),
+            "disagree_network_right": float(np.mean((net == truth)[differ])),
+            "disagree_head_right": float(np.mean((head == truth)[differ]))}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("records", type=Path, help="bench/fusion_records.py output")
+    parser.add_argument("--aligned", type=Path, help="bench/aligned_validation.py output (with the substance head)")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "substance_ceiling.json")
     args = parser.parse_args()
     data = json.loads(args.records.read_text())
@@ -93,11 +113,20 @@ def main() -> None:
     val = [Region(r, labs, sigma, member, min_fraction) for r in data["validation"]]
     ex = [Region(r, labs, sigma, member, min_fraction) for r in data["exemplars"]]
     large = [r for r in ex if not r.small]
+    aligned = ([Region(r, labs, sigma, member, min_fraction) for r in json.loads(args.aligned.read_text())["records"]]
+               if args.aligned else [])
+    sets = {"validation": val, "aligned": aligned, "aligned, large parts": [r for r in aligned if not r.small],
+            "exemplars": ex, "exemplars, large parts": large}
+    sets = {k: v for k, v in sets.items() if v}
+    of_material = [SUBSTANCES.index(s) for s in subs]
+    train_prior = np.array([np.mean([r.truth == k for r in val]) for k in range(len(SUBSTANCES))])
 
-    def inference_8(r: Region) -> int:
+    def inference_8(r: Region, prior: np.ndarray | None = None) -> int:
         nt = np.exp(np.log(r.n) / temperature)
         head = np.ones_like(r.h) if r.small else r.h
-        scores = head * (nt / nt.sum())[[SUBSTANCES.index(s) for s in subs]] * r.c
+        if prior is not None and not r.small:
+            head = head / np.maximum(prior[of_material], 1e-6)
+        scores = head * (nt / nt.sum())[of_material] * r.c
         return SUBSTANCES.index(subs[substance_first_order(scores, subs, SUBSTANCES[r.net] if r.small else None)[0]])
 
     experts = {
@@ -106,19 +135,22 @@ def main() -> None:
         "classifier's substance head": lambda r: int(np.argmax(r.s)),
         "colour likelihood: substance with most mass": lambda r: int(np.argmax(member @ r.c / member.sum(axis=1))),
         "ours, inference-8 (the pipeline)": inference_8,
+        "ours, head divided by the training substance prior": lambda r: inference_8(r, train_prior),
     }
     rows: dict[str, dict[str, float]] = {}
     for name, decide in experts.items():
-        rows[name] = {"validation": accuracy(val, decide), "exemplars": accuracy(ex, decide),
-                      "exemplars, large parts": accuracy(large, decide)}
+        rows[name] = {k: accuracy(v, decide) for k, v in sets.items()}
+    recall = {name: {k: {s: accuracy([r for r in v if r.truth == i], decide) for i, s in enumerate(SUBSTANCES)}
+                     for k, v in sets.items() if k.endswith("large parts") or k == "validation"}
+              for name, decide in experts.items()}
+    shares = {k: {s: float(np.mean([r.truth == i for r in v])) for i, s in enumerate(SUBSTANCES)}
+              for k, v in sets.items()}
     weights: dict[str, list[float]] = {}
     for name, cols in POOLS.items():
         w = fit_pool(val, cols)
         weights[f"validation fit {name}"] = w.round(3).tolist()
-        decide = (lambda c, v: lambda r: pool_decision(r, c, v))(cols, w)
-        rows[f"pool {name}, fit on validation renders"] = {
-            "validation": accuracy(val, decide), "exemplars": accuracy(ex, decide),
-            "exemplars, large parts": accuracy(large, decide)}
+        decide = partial(pool_decision, cols=cols, w=w)
+        rows[f"pool {name}, fit on validation renders"] = {k: accuracy(v, decide) for k, v in sets.items()}
         hits: list[bool] = []
         hits_large: list[bool] = []
         for half in (0, 1):
@@ -128,33 +160,32 @@ def main() -> None:
             hits += [pool_decision(r, cols, w_half) == r.truth for r in test]
             hits_large += [pool_decision(r, cols, w_half) == r.truth for r in test if not r.small]
         rows[f"pool {name}, fit on the other half of the exemplars"] = {
-            "validation": float("nan"), "exemplars": float(np.mean(hits)),
-            "exemplars, large parts": float(np.mean(hits_large))}
-    net = np.array([r.net for r in large])
-    head = np.array([int(np.argmax(member @ r.h)) for r in large])
-    truth = np.array([r.truth for r in large])
-    differ = net != head
-    agreement = {
-        "parts": int(len(large)), "agree": float(np.mean(~differ)),
-        "accuracy_when_agree": float(np.mean((net == truth)[~differ])),
-        "disagree_network_right": float(np.mean((net == truth)[differ])),
-        "disagree_head_right": float(np.mean((head == truth)[differ])),
-    }
+            "exemplars": float(np.mean(hits)), "exemplars, large parts": float(np.mean(hits_large))}
+    agreement = {k: agree(v, member) for k, v in sets.items() if k.endswith("large parts") or k == "validation"}
     print(f"{len(val)} validation regions, {len(ex)} exemplar parts ({len(large)} of training size); "
           f"network T {temperature:.3f}, colour sigma {sigma}")
-    print("\n| substance decided by | validation renders | exemplars | exemplars, parts >= 0.5% |")
-    print("|---|---:|---:|---:|")
+    print(f"\n| substance decided by | {' | '.join(sets)} |\n|---|{'---:|' * len(sets)}")
     for name, r in rows.items():
-        print(f"| {name} | {r['validation']:.4f} | {r['exemplars']:.4f} | {r['exemplars, large parts']:.4f} |")
+        cells = " | ".join(f"{r[k]:.4f}" if k in r else "—" for k in sets)
+        print(f"| {name} | {cells} |")
+    print("\nshare of each true substance: " + "; ".join(
+        f"{k} " + ", ".join(f"{s} {v:.2f}" for s, v in share.items()) for k, share in shares.items()))
+    print("recall per true substance (" + ", ".join(SUBSTANCES) + "):")
+    for name, per_set in recall.items():
+        print(f"  {name}: " + "; ".join(f"{k} " + " ".join(f"{v:.2f}" for v in per.values())
+                                         for k, per in per_set.items()))
     print("\nweights (network, head, colour, substance head columns as used):")
     for name, w in weights.items():
         print(f"  {name}: {w}")
-    print(f"\nexemplar parts of training size: network and material head agree on {agreement['agree']:.3f} "
-          f"(right {agreement['accuracy_when_agree']:.3f} of those); where they disagree the network is right "
-          f"{agreement['disagree_network_right']:.3f}, the head {agreement['disagree_head_right']:.3f}")
+    print("\nnetwork vs material head (substance with most mass):")
+    for k, a in agreement.items():
+        print(f"  {k}: agree on {a['agree']:.3f} of {a['parts']} (right {a['accuracy_when_agree']:.3f} of those); "
+              f"where they disagree the network is right {a['disagree_network_right']:.3f}, "
+              f"the head {a['disagree_head_right']:.3f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"records": str(args.records), "rows": rows, "weights": weights,
-                                    "agreement": agreement}, indent=2))
+    args.out.write_text(json.dumps({"records": str(args.records), "aligned": str(args.aligned or ""), "rows": rows,
+                                    "weights": weights, "agreement": agreement, "shares": shares,
+                                    "recall": recall, "train_prior": train_prior.tolist()}, indent=2))
 
 
 if __name__ == "__main__":
