@@ -27,7 +27,6 @@ import numpy as np
 import sqlalchemy as sa
 
 from photoshape_flow.classify.assignment import median_lab
-from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
@@ -41,7 +40,7 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ranking_evidence import exemplar_pairs, load_evidence
+from ranking_evidence import exemplar_pairs, load_evidence, validation_regions
 
 
 def _lab(rgb: np.ndarray, mask: np.ndarray) -> list[float] | None:
@@ -68,13 +67,7 @@ def main() -> None:
     with session_scope() as session:
         ev = load_evidence(session, store, settings, clf.materials)
         data = training_data(session, store)
-        for number, item in enumerate(data.val[:COLOR_SIGMA_RENDERS]):
-            ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
-            minimum = int(np.ceil(min_fraction * ids.size))
-            regions = [(int(v), ids == v) for v, c in zip(*np.unique(ids, return_counts=True), strict=True)
-                       if v != 0 and c >= minimum and int(v) in index]
-            if not regions:
-                continue
+        for number, ids, rgb, regions in validation_regions(data.val[:COLOR_SIGMA_RENDERS], index, min_fraction):
             mat, sub = clf.predict(rgb, [mask for _, mask in regions])
             net = part_substances(ids, predict_substances(ev.network, rgb, ev.net_size), [r[0] for r in regions])
             for k, ((mid, mask), part) in enumerate(zip(regions, net, strict=True)):

@@ -16,6 +16,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
@@ -107,3 +108,20 @@ def exemplar_pairs(session: Session, store: BlobStore, gt: Any) -> Iterator[Exem
                 sa.select(m.PartSubstance).where(m.PartSubstance.pair_id == pair.id)).scalars()},
             parts=list(session.execute(sa.select(m.Part).where(m.Part.shape_id == pair.shape_id)).scalars()),
         )
+
+
+def validation_regions(
+    items: Any, materials: Any, min_fraction: float = 0.005
+) -> Iterator[tuple[int, np.ndarray, np.ndarray, list[tuple[int, np.ndarray]]]]:
+    """(render number, material-id map, RGB, [(material id, mask)]) of each validation render with regions.
+
+    Regions are the exact material regions of at least `min_fraction` of the image (the classifier's
+    training threshold) whose material is in `materials`, as the validation benches score them.
+    """
+    for number, item in enumerate(items):
+        ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
+        minimum = int(np.ceil(min_fraction * ids.size))
+        regions = [(int(v), ids == v) for v, c in zip(*np.unique(ids, return_counts=True), strict=True)
+                   if v != 0 and c >= minimum and int(v) in materials]
+        if regions:
+            yield number, ids, rgb, regions

@@ -43,7 +43,6 @@ from photoshape_flow.classify.color_prior import (
     material_lab_matrix,
     region_color_distances,
 )
-from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.infer import substance_first_order
 from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model, predict_substances
@@ -58,7 +57,7 @@ from photoshape_flow.pipeline.training import load_material_classifier, training
 from photoshape_flow.store import BlobStore
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ranking_evidence import exemplar_pairs
+from ranking_evidence import exemplar_pairs, validation_regions
 
 
 def _summary(hits: dict[str, list[tuple[float, float, float]]]) -> dict[str, dict[str, float]]:
@@ -90,13 +89,7 @@ def validation_renders(clf, data, labs: np.ndarray, sigma: float, network: tuple
     index = {mid: i for i, mid in enumerate(clf.materials)}
     subs = np.array(clf.material_substances)
     hits: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
-    for item in data.val[:COLOR_SIGMA_RENDERS]:
-        ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
-        minimum = int(np.ceil(0.005 * ids.size))
-        regions = [(int(v), ids == v) for v, c in zip(*np.unique(ids, return_counts=True), strict=True)
-                   if v != 0 and c >= minimum and int(v) in index]
-        if not regions:
-            continue
+    for _, ids, rgb, regions in validation_regions(data.val[:COLOR_SIGMA_RENDERS], index):
         probs, _ = clf.predict(rgb, [mask for _, mask in regions])
         net = part_substances(ids, predict_substances(model, rgb, size), [r[0] for r in regions])
         for k, ((mid, mask), part) in enumerate(zip(regions, net, strict=True)):
