@@ -68,7 +68,7 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
         keys = asyncio.run(artifact_keys())
     assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
                                        "training-renders", "training", "inference", "publish"]
-    assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-items-progress"} <= keys
+    assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-progress"} <= keys
     with session_scope() as session:
         progress = {p.stage: p for p in stage_progress(session)}
         candidates = session.execute(sa.text("SELECT COUNT(DISTINCT pair_id) FROM photoshape_candidate "

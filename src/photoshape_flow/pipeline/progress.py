@@ -93,11 +93,16 @@ def fine_alignment_progress(session: Session) -> StageProgress:
     return StageProgress("fine-alignment", "pairs", done, n_pairs - done - failed, failed)
 
 
-def substances_progress(session: Session) -> StageProgress:
+def _pairs_progress(session: Session, stage: str, done: sa.Select, ready: sa.Select) -> StageProgress:
+    """Active pairs with a row in `done`, and those `ready` for the stage (inputs there) without one."""
     pairs = active_pairs()
-    done = _count(session, pairs.where(m.Pair.id.in_(_with_substance())))
-    pending = _count(session, pairs.where(m.Pair.id.in_(_aligned_ok()), m.Pair.id.not_in(_with_substance())))
-    return StageProgress("substances", "pairs", done, pending, 0)
+    finished = _count(session, pairs.where(m.Pair.id.in_(done)))
+    pending = _count(session, pairs.where(m.Pair.id.in_(ready), m.Pair.id.not_in(done)))
+    return StageProgress(stage, "pairs", finished, pending, 0)
+
+
+def substances_progress(session: Session) -> StageProgress:
+    return _pairs_progress(session, "substances", _with_substance(), _aligned_ok())
 
 
 def training_renders_progress(session: Session) -> StageProgress:
@@ -123,10 +128,7 @@ def training_progress(session: Session) -> StageProgress:
 
 
 def inference_progress(session: Session) -> StageProgress:
-    pairs = active_pairs()
-    done = _count(session, pairs.where(m.Pair.id.in_(_inferred())))
-    pending = _count(session, pairs.where(m.Pair.id.in_(_with_substance()), m.Pair.id.not_in(_inferred())))
-    return StageProgress("inference", "pairs", done, pending, 0)
+    return _pairs_progress(session, "inference", _inferred(), _with_substance())
 
 
 def publish_progress(session: Session) -> StageProgress:
