@@ -50,6 +50,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.assignment import PartAssignment, Provenance, assignment_document
+from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -57,7 +58,6 @@ log = logging.getLogger(__name__)
 
 CODE_VERSION = "publish-v1"
 DEFAULT_METHOD = "classifier"
-DEFAULT_FORMATS: tuple[str, ...] = ("glb", "xml", "obj")
 # elevation (rad), distance, horizontal fov (deg): the unit cube's bounding sphere (r = 0.87) fits the frame
 TURNTABLE_CAMERA = (math.radians(20.0), 2.6, 40.0)
 
@@ -308,7 +308,7 @@ def run_publish(
     renderer: Any = None,
 ) -> PublishSummary:
     """Render and export every candidate of `method` (all pairs, or `pair_ids`); resumable, idempotent."""
-    from photoshape_flow.export.bundle import export_photoshape, parse_formats
+    from photoshape_flow.export.bundle import export_photoshape
     from photoshape_flow.pipeline.renderings import record_rendering
 
     settings = settings or get_settings()
@@ -444,7 +444,7 @@ def export_candidates(
     Each result: ``{"pair_id", "method_key", "status", "error", "files": {format: path}}``; a failing
     candidate is reported and the others go on.
     """
-    from photoshape_flow.export.bundle import export_photoshape, parse_formats
+    from photoshape_flow.export.bundle import export_photoshape
 
     settings = settings or get_settings()
     formats = parse_formats(list(formats))
