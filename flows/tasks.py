@@ -82,7 +82,7 @@ def compute_pairs_task(profile: str) -> dict[str, Any]:
 
 @task(name="write-gallery")
 def gallery_task() -> str:
-    from photoshape_flow.pipeline.publish import write_gallery_site
+    from photoshape_flow.pipeline.gallery_site import write_gallery_site
     from photoshape_flow.pipeline.runner import gallery_dir
 
     return str(write_gallery_site(gallery_dir(get_settings())))

@@ -28,7 +28,7 @@ def export(
 ) -> None:
     """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""
     require_database()
-    from photoshape_flow.pipeline.publish import export_candidates
+    from photoshape_flow.pipeline.downloads import export_candidates
 
     try:
         chosen = parse_formats(formats)

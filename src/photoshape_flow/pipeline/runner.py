@@ -222,7 +222,8 @@ def gallery_dir(settings: Settings) -> Path:
 
 def run_publish_stage(settings: Settings, profile: Profile, pair_ids: Sequence[int] | None = None) -> dict[str, Any]:
     """PhotoShape renders and exports of the best pairs of every shape, then the gallery."""
-    from photoshape_flow.pipeline.publish import run_publish, write_gallery_site
+    from photoshape_flow.pipeline.gallery_site import write_gallery_site
+    from photoshape_flow.pipeline.publish import run_publish
 
     ids = list(pair_ids) if pair_ids is not None else publish_pair_ids(settings, profile.publish_max_rank)
     summary = run_publish(ids, None, settings, views=profile.publish_views, size=profile.publish_size,
