@@ -130,12 +130,12 @@ def main() -> None:
     from photoshape_flow.align.partmap import render_coarse_part_map, resize_labels
     from photoshape_flow.align.viewpoints import cameras_from_rows
     from photoshape_flow.imaging.squares import square_box
-    from photoshape_flow.pipeline.runner import PROFILES
+    from photoshape_flow.profiles import PROFILES
     from photoshape_flow.render import Renderer
 
     settings = get_settings()
     store = BlobStore(settings.blob_root)
-    fine = FineParams(size=PROFILES[args.profile].fine_size)
+    fine = FineParams(size=PROFILES[args.profile].fine_alignment.size)
     row, clf = load_material_classifier(settings=settings)
     min_fraction = float((row.config or {}).get("min_region_fraction", ClassifierConfig.min_region_fraction))
     index = {mid: i for i, mid in enumerate(clf.materials)}
@@ -159,7 +159,7 @@ def main() -> None:
         feats, shape_of_row = np.concatenate(blocks), np.asarray(shape_of_row)
         feat_norms = (feats**2).sum(axis=1)
         first_row = {int(sid): int(i) for i, sid in reversed(list(enumerate(shape_of_row)))}  # a shape's view 0
-        topk = PROFILES[args.profile].exemplar_topk
+        topk = PROFILES[args.profile].coarse_alignment.exemplar_topk
         picked = validation_specs(session, args.count)
         for number, (_, spec) in enumerate(picked):
             inputs.load(session, spec)

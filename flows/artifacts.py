@@ -49,7 +49,7 @@ def publish_candidates_table(key: str = "photoshape-candidates", rows: list[dict
 def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, Any] | None = None,
                     key: str = "photoshape-run-summary") -> None:
     """Markdown: per-stage wall time and the done/pending/failed counts of every stage."""
-    from photoshape_flow.pipeline.progress import stage_progress
+    from photoshape_flow.stages import stage_progress
 
     with session_scope(get_settings().resolved_database_url) as session:
         progress = stage_progress(session)

@@ -69,7 +69,7 @@ def build_deployments(path: Path | None = None, names: Sequence[str] | None = No
         flow = load_flow(spec["entrypoint"])
         out.append(flow.to_deployment(
             name=spec["name"],
-            description=spec.get("description"),
+            description=spec.get("description") or flow.description,
             tags=spec.get("tags"),
             parameters=spec.get("parameters") or {},
             schedules=[_schedule(s) for s in spec.get("schedules") or []] or None,

@@ -9,21 +9,18 @@ from photoshape_flow.flows.stages import STAGE_FLOWS, ProfileName, timed
 from photoshape_flow.flows.tasks import task_runner
 from prefect import flow, get_run_logger
 
-from photoshape_flow.vocab import STAGES
+from photoshape_flow.stages import STAGE_NAMES
 
-StageName = Literal[
-    "ingest", "coarse-alignment", "fine-alignment", "substances", "training-renders", "training", "inference",
-    "publish",
-]
+StageName = Literal[STAGE_NAMES]  # type: ignore[valid-type]
 
 
 @flow(name="photoshape-pipeline", task_runner=task_runner())
 def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName] | None = None) -> dict[str, Any]:
     """Run the stages in canonical order; each resumes from what earlier runs recorded (incremental)."""
-    wanted = set(stages or STAGES)
+    wanted = set(stages or STAGE_NAMES)
     results: dict[str, Any] = {}
     times: dict[str, float] = {}
-    for name in STAGES:
+    for name in STAGE_NAMES:
         if name not in wanted:
             continue
         results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile)

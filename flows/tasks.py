@@ -1,4 +1,4 @@
-"""Thin Prefect tasks over the pipeline: IDs and profile names in, JSON summaries out.
+"""Thin Prefect tasks over the stage registry: names, IDs and profile overrides in, JSON reports out.
 
 No task receives a session, an array or a live object, so every task is cacheable, retryable and
 runs unchanged in a Dask worker process. The task runner of the stage flows is chosen from the
@@ -39,50 +39,59 @@ def _logger() -> logging.Logger | logging.LoggerAdapter:
         return logging.getLogger("photoshape_flow.flows")
 
 
-@task(name="plan-batches", task_run_name="plan {stage} {part}")
-def plan_batches(stage: str, profile: str, batch_size: int, part: str | None = None) -> list[list[int]]:
-    """Batches of the item IDs a fanning-out stage works on."""
-    from photoshape_flow.pipeline.work import plan
+def flow_context() -> Any:
+    """The flows' stage context: settings of this process, events to Prefect."""
+    from photoshape_flow.flows.events import PrefectEvents
 
-    batches = plan(stage, profile, batch_size=batch_size, part=part)
-    _logger().info("%s: %d items in %d batches", stage, sum(map(len, batches)), len(batches))
-    return batches
+    from photoshape_flow.stages import StageContext
+
+    settings = get_settings()
+    return StageContext.create(settings, events=PrefectEvents(settings))
 
 
-@task(name="process-batch", task_run_name="{stage} batch of {n}", retries=1, retry_delay_seconds=10)
-def process_batch(stage: str, ids: list[int], profile: str, n: int, part: str | None = None,
-                  method: str | None = None) -> dict[str, Any]:
-    """Claim the batch's items and run the stage on those won (see pipeline.work)."""
-    from photoshape_flow.pipeline.work import process
+def _profile(profile: str, overrides: list[str] | None) -> Any:
+    from photoshape_flow.profiles import resolve_profile
 
-    summary = process(stage, ids, profile, part=part, method=method)
-    _logger().info("%s: claimed %d of %d", stage, summary["claimed"], summary["requested"])
-    return summary
+    return resolve_profile(profile, overrides or [])
+
+
+@task(name="plan-batches", task_run_name="plan {stage}")
+def plan_batches(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> list[dict[str, Any]]:
+    """Units of work of a fanning-out stage, as {part, ids} dicts."""
+    from photoshape_flow.stages import plan_batches as plan
+
+    units = plan(stage, _profile(profile, overrides), flow_context(), batch_size)
+    _logger().info("%s: %d items in %d batches", stage, sum(len(u.ids) for u in units), len(units))
+    return [{"part": u.part, "ids": list(u.ids)} for u in units]
+
+
+@task(name="process-batch", task_run_name="{stage} {part} batch of {n}", retries=1, retry_delay_seconds=10)
+def process_batch(stage: str, part: str, ids: list[int], profile: str, overrides: list[str] | None,
+                  n: int) -> dict[str, Any]:
+    """Claim the batch's items and run the stage on those won (see photoshape_flow.stages.run)."""
+    from photoshape_flow.stages import WorkUnit, process
+
+    report = process(stage, WorkUnit(part, tuple(ids)), _profile(profile, overrides), flow_context())
+    _logger().info("%s %s: %d done, %d skipped, %d failed of %d", stage, part, report.done, report.skipped,
+                   report.failed, n)
+    return report.to_dict()
+
+
+@task(name="finish-stage", task_run_name="finish {stage}")
+def finish_stage(stage: str, profile: str, overrides: list[str] | None) -> dict[str, Any] | None:
+    """The stage's step after all its batches (pairs of coarse alignment, the gallery of publish)."""
+    from photoshape_flow.stages import finish
+
+    report = finish(stage, _profile(profile, overrides), flow_context())
+    return None if report is None else report.to_dict()
 
 
 @task(name="run-stage", task_run_name="{stage}")
-def run_whole_stage(stage: str, profile: str, options: dict[str, Any] | None = None) -> dict[str, Any]:
+def run_whole_stage(stage: str, profile: str, overrides: list[str] | None = None,
+                    work: Any = None) -> dict[str, Any]:
     """A stage that does not fan out (its pipeline function batches and resumes internally)."""
-    from photoshape_flow.pipeline.runner import run_stage
+    from photoshape_flow.stages import run_stage
 
-    result = run_stage(stage, profile, **(options or {}))
-    _logger().info("%s finished in %.1f s", stage, result.seconds)
-    return {"seconds": result.seconds, "summary": result.summary}
-
-
-@task(name="compute-pairs")
-def compute_pairs_task(profile: str) -> dict[str, Any]:
-    """Exact retrieval over all descriptors, inverted into per-shape pairs (section 4.1)."""
-    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig, compute_pairs
-    from photoshape_flow.pipeline.runner import get_profile
-
-    prof = get_profile(profile)
-    return compute_pairs(config=CoarseConfig(exemplar_topk=prof.exemplar_topk, shape_topn=prof.shape_topn))
-
-
-@task(name="write-gallery")
-def gallery_task() -> str:
-    from photoshape_flow.pipeline.gallery_site import write_gallery_site
-    from photoshape_flow.pipeline.runner import gallery_dir
-
-    return str(write_gallery_site(gallery_dir(get_settings())))
+    report = run_stage(stage, _profile(profile, overrides), flow_context(), work)
+    _logger().info("%s finished in %.1f s", stage, report.seconds)
+    return report.to_dict()

@@ -1,21 +1,11 @@
 """The paper's vocabulary as constants shared by every layer.
 
-One canonical list of stage names (CLI `run`/`status`, flows and deployments use these), the five
-substances of section 4.3, and the curation grades of the original code's result taxonomy.
+The five substances of section 4.3, the assignment methods (ours and the baselines) and the
+curation grades of the original code's result taxonomy. Stage names come from the stage registry
+(`photoshape_flow.stages.STAGE_NAMES`).
 """
 
 from __future__ import annotations
-
-STAGES: tuple[str, ...] = (
-    "ingest",
-    "coarse-alignment",
-    "fine-alignment",
-    "substances",
-    "training-renders",
-    "training",
-    "inference",
-    "publish",
-)
 
 # Index order matters: it is the label order of the substance network (0 = background).
 SUBSTANCES: tuple[str, ...] = ("leather", "fabric", "wood", "metal", "plastic")
@@ -36,7 +26,8 @@ GRADES: tuple[str, ...] = (
     "not_sure",
 )
 
-ASSIGNMENT_METHODS: tuple[str, ...] = ("classifier", "builtin", "no-classifier", "color-match")
+# ours first, then the baselines in the order inference runs them and tables list them
+ASSIGNMENT_METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 
 RENDERING_KINDS: tuple[str, ...] = (
     "preview",        # material preview (sphere / cloth patch)

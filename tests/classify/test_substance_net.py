@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from photoshape_flow.classify.substance_configs import get_config
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.classify.substance_train import (
     SubstanceData,
@@ -15,7 +16,6 @@ from photoshape_flow.classify.substance_train import (
     checkpoint_from_bytes,
     checkpoint_to_bytes,
     confusion_matrix,
-    get_config,
     load_model,
     metrics_from_confusion,
     predict_substances,

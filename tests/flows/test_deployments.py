@@ -15,7 +15,7 @@ from tests.conftest import REPO_ROOT
 from typer.testing import CliRunner
 
 from photoshape_flow.cli import app
-from photoshape_flow.vocab import STAGES
+from photoshape_flow.stages import STAGE_NAMES as STAGES
 
 
 def test_every_declared_deployment_is_built_and_listed() -> None:

@@ -45,7 +45,7 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
     from photoshape_flow.db import migrate
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import get_engine, session_scope
-    from photoshape_flow.pipeline.progress import stage_progress
+    from photoshape_flow.stages import stage_progress
 
     data_root = data_root_with_inbox(tmp_path / "data", tiny_demo)
     monkeypatch.setenv("PHOTOSHAPE_DATA_ROOT", str(data_root))

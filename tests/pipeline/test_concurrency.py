@@ -14,12 +14,12 @@ pytestmark = pytest.mark.postgres
 def _worker(url: str, data_root: str, batches: list[list[int]], queue: mp.Queue) -> None:
     os.environ["PHOTOSHAPE_DATABASE_URL"] = url
     os.environ["PHOTOSHAPE_DATA_ROOT"] = data_root
-    from photoshape_flow.pipeline.work import process
+    from photoshape_flow.stages import StageContext, WorkUnit, process
 
     claimed = []
     for batch in batches:
-        summary = process("inference", batch, "tiny", method="color-match")
-        claimed.append(summary["claimed"])
+        report = process("inference", WorkUnit("color-match", tuple(batch)), "tiny", StageContext.create())
+        claimed.append(report.done + report.failed)
     queue.put(claimed)
 
 

@@ -8,11 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sqlalchemy as sa
+from photoshape_flow.flows import events as prefect_events
+from photoshape_flow.flows.events import PrefectEvents
 from tests.geometry.makers import write_png
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline import ingest_common
 from photoshape_flow.pipeline.ingest import MATERIAL_EVENT, ingest_materials, render_material_previews
 
 
@@ -90,23 +91,23 @@ def test_material_event_once_per_batch_only_with_a_prefect_api(db_url: str, tmp_
     from photoshape_flow.config import get_settings
 
     calls: list[tuple] = []
-    monkeypatch.setattr(ingest_common, "_send_event", lambda *args, **kw: calls.append(args))
-    monkeypatch.setattr(ingest_common, "_prefect_api_url", lambda: None)
+    monkeypatch.setattr(prefect_events, "_send_event", lambda *args, **kw: calls.append(args))
+    monkeypatch.setattr(prefect_events, "_prefect_api_url", lambda: None)
     root = make_folders(tmp_path / "mats")
     monkeypatch.delenv("PREFECT_API_URL", raising=False)
-    ingest_materials([root / "wood_oak"], previews=False)
+    ingest_materials([root / "wood_oak"], previews=False, events=PrefectEvents(get_settings()))
     assert calls == []  # no API configured: no event
 
     monkeypatch.setenv("PHOTOSHAPE_PREFECT_API_URL", "http://127.0.0.1:9/api")
     get_settings.cache_clear()
-    summary = ingest_materials([root], previews=False)
+    summary = ingest_materials([root], previews=False, events=PrefectEvents(get_settings()))
     assert len(calls) == 1
     url, event, resource, payload = calls[0]
     assert (url, event) == ("http://127.0.0.1:9/api", MATERIAL_EVENT)
     assert resource == {"prefect.resource.id": "photoshape.material-set"}
     assert payload["count"] == 2 == len(summary.new_material_ids)
     assert sorted(payload["material_ids"]) == sorted(summary.new_material_ids)
-    ingest_materials([root], previews=False)  # nothing new: no event
+    ingest_materials([root], previews=False, events=PrefectEvents(get_settings()))  # nothing new: no event
     assert len(calls) == 1
 
 
@@ -118,22 +119,24 @@ def test_event_goes_through_emit_event_when_prefect_uses_the_same_api(db_url: st
 
     sent: list[dict] = []
     monkeypatch.setattr(prefect.events, "emit_event", lambda **kw: sent.append(kw) or object())
-    monkeypatch.setattr(ingest_common, "_prefect_api_url", lambda: "http://prefect:4200/api")
+    monkeypatch.setattr(prefect_events, "_prefect_api_url", lambda: "http://prefect:4200/api")
     monkeypatch.setenv("PHOTOSHAPE_PREFECT_API_URL", "http://prefect:4200/api")
     get_settings.cache_clear()
-    ingest_materials([make_folders(tmp_path / "mats") / "wood_oak"], previews=False)
+    ingest_materials([make_folders(tmp_path / "mats") / "wood_oak"], previews=False,
+                     events=PrefectEvents(get_settings()))
     assert len(sent) == 1 and sent[0]["event"] == MATERIAL_EVENT and sent[0]["payload"]["count"] == 1
 
 
 def test_unreachable_prefect_never_fails_ingest(db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from photoshape_flow.config import get_settings
 
-    monkeypatch.setattr(ingest_common, "_prefect_api_url", lambda: None)
+    monkeypatch.setattr(prefect_events, "_prefect_api_url", lambda: None)
     monkeypatch.setenv("PHOTOSHAPE_PREFECT_API_URL", "http://127.0.0.1:9/api")  # nothing listens there
     get_settings.cache_clear()
-    summary = ingest_materials([make_folders(tmp_path / "mats") / "wood_oak"], previews=False)
+    events = PrefectEvents(get_settings())
+    summary = ingest_materials([make_folders(tmp_path / "mats") / "wood_oak"], previews=False, events=events)
     assert len(summary.added) == 1
-    assert ingest_common.emit_material_event(get_settings(), summary.added) is False
+    assert events.materials_added(summary.added) is False
 
 
 def test_previews_skip_cleanly_without_an_envmap(db_url: str, tmp_path: Path) -> None:

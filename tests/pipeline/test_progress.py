@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.progress import stage_progress
+from photoshape_flow.pipeline.progress import coarse_alignment_progress
 
 
 def coarse(url: str) -> tuple[int, int, int]:
     with session_scope(url) as session:
-        p = {p.stage: p for p in stage_progress(session)}["coarse-alignment"]
+        p = coarse_alignment_progress(session)
         return p.done, p.pending, p.failed
 
 

@@ -22,10 +22,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from photoshape_flow.classify.substance_configs import SUBSTANCE_ARCHITECTURE
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 NUM_CLASSES = len(SUBSTANCE_LABELS)
-ARCHITECTURE = "substance-unet-res"
+ARCHITECTURE = SUBSTANCE_ARCHITECTURE
 
 
 def _conv_bn(cin: int, cout: int, stride: int = 1) -> nn.Sequential:

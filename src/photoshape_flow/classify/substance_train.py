@@ -17,9 +17,8 @@ next epoch; the random streams are seeded per (seed, epoch), so an interrupted a
 the same batches as an uninterrupted one. The pipeline stores checkpoints in the blob store and the
 Classifier row; this module knows nothing of either.
 
-Presets (`get_config`): "tiny" (CI: a few iterations at 32 px), "cpu" (the demo: 128 px, 30 epochs;
-~75 img/s on 2 idle cores, so ~2.5 min for 400 bootstrap renders), "gpu" (192 px, width 32, 60
-epochs, batch 64; the device always comes from settings.device, "auto" picks cuda when present).
+Configurations (`SubstanceTrainConfig` and its presets) live in `classify/substance_configs.py`, so
+profiles can nest them without importing torch.
 """
 
 from __future__ import annotations
@@ -29,69 +28,18 @@ import logging
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from photoshape_flow.classify.substance_net import ARCHITECTURE, NUM_CLASSES, SubstanceNet
+from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
+from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class SubstanceTrainConfig:
-    preset: str = "cpu"
-    size: int = 128
-    width: int = 16
-    epochs: int = 30
-    batch_size: int = 16
-    iters_per_epoch: int | None = None  # None: one pass over the training images
-    lr: float = 2e-3
-    min_lr_fraction: float = 0.05
-    weight_decay: float = 1e-4
-    crop_scale: tuple[float, float] = (0.55, 1.0)
-    flip: bool = True
-    jitter: float = 0.25
-    blur: float = 0.0  # maximum Gaussian sigma (source pixels) of a random blur before the crop; 0: off
-    frame_object: bool = False  # crop renders to the square around the object, as exemplars are cropped
-    class_balance: bool = True
-    seed: int = 0
-    device: str = "cpu"
-
-    @property
-    def architecture(self) -> str:
-        return f"{ARCHITECTURE}-w{self.width}"
-
-    def to_dict(self) -> dict[str, Any]:
-        data = asdict(self)
-        data["crop_scale"] = list(self.crop_scale)
-        return data
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SubstanceTrainConfig:
-        values = dict(data)
-        if "crop_scale" in values:
-            values["crop_scale"] = tuple(values["crop_scale"])
-        known = set(cls.__dataclass_fields__)
-        return cls(**{k: v for k, v in values.items() if k in known})
-
-
-PRESETS: dict[str, SubstanceTrainConfig] = {
-    "tiny": SubstanceTrainConfig(preset="tiny", size=32, width=8, epochs=2, batch_size=4, iters_per_epoch=3),
-    "cpu": SubstanceTrainConfig(preset="cpu", size=128, width=16, epochs=30, batch_size=16),
-    "gpu": SubstanceTrainConfig(preset="gpu", size=192, width=32, epochs=60, batch_size=64, lr=3e-3, device="cuda"),
-}
-
-
-def get_config(name: str, **overrides: Any) -> SubstanceTrainConfig:
-    """A preset by name with field overrides (e.g. device resolved from settings)."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown substance training preset {name!r}; choose from {sorted(PRESETS)}")
-    return replace(PRESETS[name], **overrides)
 
 
 def resolve_device(setting: str) -> str:

@@ -24,13 +24,16 @@ def demo(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Generate procedural shapes, SVBRDFs, studio envmaps and photo-like exemplars, then run every stage."""
+    from photoshape_flow.cli.common import stage_context
     from photoshape_flow.cli.eval_cmd import print_metrics
-    from photoshape_flow.cli.run_cmd import print_results
+    from photoshape_flow.cli.run_cmd import print_reports
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import migrate
     from photoshape_flow.demo import generate_demo
-    from photoshape_flow.pipeline.runner import COLLECTIONS, gallery_dir, run_all, run_stage
-    from photoshape_flow.vocab import STAGES
+    from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.stages import STAGE_NAMES, run_all
+    from photoshape_flow.stages.ingest import COLLECTIONS, IngestRequest
+    from photoshape_flow.stages.publish import gallery_dir
 
     setup_logging(verbose)
     settings = get_settings()
@@ -42,20 +45,21 @@ def demo(
     out_dir = settings.data_root / "demo" / size.value
     console.print(f"generating the {size.value} demo collections in {out_dir} ...", highlight=False)
     manifest = generate_demo(out_dir, size.value, seed=settings.seed if seed is None else seed)
-    roots = {name: [manifest.root / name] for name in COLLECTIONS}
     source = f"demo-{size.value}"
-    provenance = {"license": "CC0-1.0", "attribution": "photoshape_flow demo generator (procedural, seed "
-                  f"{manifest.seed})"}
+    request = IngestRequest(
+        roots={name: [manifest.root / name] for name in COLLECTIONS}, source=source, license="CC0-1.0",
+        attribution=f"photoshape_flow demo generator (procedural, seed {manifest.seed})",
+    )
+    ctx, profile = stage_context(), resolve_profile(size.value)
+    announce = lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")  # noqa: E731
     if prefect:
         from photoshape_flow.flows.pipeline import photoshape_pipeline
 
-        results = [run_stage("ingest", size.value, roots=roots, source=source, **provenance)]
-        photoshape_pipeline(profile=size.value, stages=[s for s in STAGES if s != "ingest"])
+        reports = run_all(profile, ctx, names=["ingest"], ingest=request, origin="demo", on_stage=announce)
+        photoshape_pipeline(profile=size.value, stages=[s for s in STAGE_NAMES if s != "ingest"])
     else:
-        results = run_all(size.value, ingest_roots=roots, ingest_source=source,
-                          ingest_license=provenance["license"], ingest_attribution=provenance["attribution"],
-                          on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
-    print_results(results)
+        reports = run_all(profile, ctx, ingest=request, origin="demo", on_stage=announce)
+    print_reports(reports)
     if evaluate:
         from photoshape_flow.pipeline.evaluate import run_evaluation
 
@@ -65,7 +69,7 @@ def demo(
         console.print(f"evaluation stored as run [bold]{run_name}[/] (table `evaluation`)")
     elapsed = time.perf_counter() - started
     console.print(f"\n[bold]demo finished in {elapsed / 60:.1f} min[/]")
-    console.print(f"  gallery:  {gallery_dir(settings) / 'index.html'}", highlight=False)
+    console.print(f"  gallery:  {gallery_dir(ctx) / 'index.html'}", highlight=False)
     console.print(f"  exports:  {settings.data_root / 'exports'}", highlight=False)
     console.print(f"  database: {settings.resolved_database_url}  (try `photoshape status`, or the SQL view "
                   "photoshape_candidate)", highlight=False)

@@ -148,13 +148,16 @@ def materials(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
 ) -> None:
     """SVBRDF folders (maps recognised by name + material.json/.toml) and analytic materials."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.flows.events import PrefectEvents
     from photoshape_flow.pipeline.ingest import ingest_materials
 
     _setup_logging(verbose)
     require_database()
     with _progress("materials") as progress:
         summary = ingest_materials(paths, substance=substance, source=source, license=license,
-                                   attribution=attribution, previews=previews, progress=progress)
+                                   attribution=attribution, previews=previews, progress=progress,
+                                   events=PrefectEvents(get_settings()))
     print_summary(summary, strict)
 
 

@@ -2,45 +2,46 @@
 
 from __future__ import annotations
 
-import json
+from collections.abc import Sequence
 
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, require_database, setup_logging
-from photoshape_flow.vocab import STAGES
+from photoshape_flow.cli.common import console, fail, require_database, resolve_profile_or_fail, setup_logging
+from photoshape_flow.profiles import PROFILES
+from photoshape_flow.stages import STAGE_NAMES, StageReport
 
 
-def print_results(results) -> None:  # type: ignore[no-untyped-def]
-    table = Table(title="stages run")
-    table.add_column("stage")
-    table.add_column("seconds", justify="right")
-    table.add_column("summary", overflow="fold")
-    for r in results:
-        text = json.dumps(r.summary, default=str)
-        table.add_row(r.stage, f"{r.seconds:.1f}", text if len(text) < 400 else text[:400] + " ...")
+def print_reports(reports: Sequence[StageReport], title: str = "stages run") -> None:
+    """One row per stage: counts and seconds (details stay in the `pipeline_run` row)."""
+    table = Table(title=title)
+    for column in ("stage", "done", "skipped", "failed", "rejected", "blocked", "seconds"):
+        table.add_column(column, justify="left" if column == "stage" else "right")
+    for r in reports:
+        table.add_row(r.stage, str(r.done), str(r.skipped), str(r.failed), str(r.rejected), str(r.blocked.count),
+                      f"{r.seconds:.1f}")
     console.print(table)
 
 
 def run(
-    stage: str = typer.Argument(..., help=f"One of: {', '.join(STAGES)}, or 'all'."),
-    profile: str = typer.Option("default", "--profile", "-p", help="tiny | small | medium | default | paper"),
+    stage: str = typer.Argument(..., help=f"One of: {', '.join(STAGE_NAMES)}, or 'all'."),
+    profile: str = typer.Option("default", "--profile", "-p", help=" | ".join(PROFILES)),
+    overrides: list[str] = typer.Option(None, "--set", help="Override a profile field, e.g. training.epochs=3 "
+                                        "(repeatable; see docs/architecture.md for the fields)."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
-    from photoshape_flow.pipeline.runner import PROFILES, run_all, run_stage
+    from photoshape_flow.cli.common import stage_context
+    from photoshape_flow.stages import run_all
 
     setup_logging(verbose)
-    if stage != "all" and stage not in STAGES:
-        fail(f"unknown stage {stage!r}; choose from {', '.join(STAGES)} or all")
-    if profile not in PROFILES:
-        fail(f"unknown profile {profile!r}; choose from {', '.join(PROFILES)}")
+    if stage != "all" and stage not in STAGE_NAMES:
+        fail(f"unknown stage {stage!r}; choose from {', '.join(STAGE_NAMES)} or all")
+    resolved = resolve_profile_or_fail(profile, overrides)
     require_database()
-    if stage == "all":
-        results = run_all(profile, on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
-    else:
-        results = [run_stage(stage, profile)]
-    print_results(results)
+    reports = run_all(resolved, stage_context(), names=None if stage == "all" else [stage],
+                      on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
+    print_reports(reports)
 
 
 def register(app: typer.Typer) -> None:

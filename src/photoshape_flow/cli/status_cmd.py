@@ -12,7 +12,8 @@ def status() -> None:
     """Counts per table and per stage: done / pending / failed."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.progress import stage_progress, table_counts
+    from photoshape_flow.pipeline.progress import table_counts
+    from photoshape_flow.stages import stage_progress
 
     settings = get_settings()
     require_database()

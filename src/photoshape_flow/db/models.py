@@ -386,7 +386,29 @@ class WorkClaim(TimestampMixin, ParamsHashMixin, Base):
     error: Mapped[str | None] = mapped_column(sa.Text)
 
 
+class PipelineRun(Base):
+    """One `photoshape run` / `demo` / flow run: the resolved profile it used and what each stage did.
+
+    The newest row tells later runs (the material-added re-run, deployments) which profile the
+    collection was built with; `profile` holds every resolved value, `overrides` what was asked for.
+    """
+
+    __tablename__ = "pipeline_run"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    origin: Mapped[str] = mapped_column(sa.String(32), comment="cli | demo | flow")
+    profile_name: Mapped[str] = mapped_column(sa.String(64), index=True)
+    overrides: Mapped[dict[str, Any]] = mapped_column(default=dict, comment="path -> value as given (--set)")
+    profile: Mapped[dict[str, Any]] = mapped_column(default=dict, comment="every resolved profile value")
+    stages: Mapped[list[Any]] = mapped_column(default=list, comment="stage names asked for, in order")
+    reports: Mapped[dict[str, Any]] = mapped_column(default=dict, comment="stage -> StageReport as JSON")
+    status: Mapped[str] = mapped_column(Short, default="running", comment="running | ok | failed")
+    error: Mapped[str | None] = mapped_column(sa.Text)
+    started_at: Mapped[dt.datetime] = mapped_column(default=utcnow, server_default=sa.func.now())
+    finished_at: Mapped[dt.datetime | None]
+
+
 ALL_TABLES: tuple[type[Base], ...] = (
     Shape, Part, Exemplar, Material, Envmap, ViewpointSet, ViewFeature, ExemplarFeature, ExemplarMatch,
-    Pair, Alignment, PartSubstance, Rendering, Classifier, Assignment, Evaluation, Grade, WorkClaim,
+    Pair, Alignment, PartSubstance, Rendering, Classifier, Assignment, Evaluation, Grade, WorkClaim, PipelineRun,
 )

@@ -9,13 +9,8 @@ and invalidate what was derived from them.
 
 from __future__ import annotations
 
-from photoshape_flow.pipeline.ingest_common import (
-    MATERIAL_EVENT,
-    IngestLimits,
-    IngestSummary,
-    emit_material_event,
-    split_for,
-)
+from photoshape_flow.events import MATERIAL_EVENT
+from photoshape_flow.pipeline.ingest_common import IngestLimits, IngestSummary, split_for
 from photoshape_flow.pipeline.ingest_envmaps import balance_envmap_splits, ingest_envmaps
 from photoshape_flow.pipeline.ingest_exemplars import delete_exemplar_dependents, ingest_exemplars
 from photoshape_flow.pipeline.ingest_materials import ingest_materials, render_material_previews
@@ -28,7 +23,6 @@ __all__ = [
     "balance_envmap_splits",
     "delete_exemplar_dependents",
     "delete_shape_dependents",
-    "emit_material_event",
     "ingest_envmaps",
     "ingest_exemplars",
     "ingest_materials",

@@ -26,6 +26,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.events import EventSink
 from photoshape_flow.imaging.svbrdf import (
     SIDECARS,
     BadMaterialError,
@@ -37,7 +38,6 @@ from photoshape_flow.pipeline.ingest_common import (
     IngestLimits,
     IngestSummary,
     Progress,
-    emit_material_event,
     files_hash,
     one_line,
     resolve_settings,
@@ -123,8 +123,13 @@ def ingest_materials(
     settings: Settings | None = None,
     limits: IngestLimits | None = None,
     progress: Progress | None = None,
+    events: EventSink | None = None,
 ) -> IngestSummary:
-    """Ingest material folders; `summary.new_material_ids` lists the materials this call added."""
+    """Ingest material folders; `summary.new_material_ids` lists the materials this call added.
+
+    `events` (the CLI's and the flows' Prefect sink) is told of the new materials once they are
+    committed, before previews render, so a re-run can be triggered as early as possible.
+    """
     settings = resolve_settings(settings)
     url = settings.resolved_database_url
     store = store_for(settings)
@@ -141,7 +146,8 @@ def ingest_materials(
                            license=license, attribution=attribution, limits=limits, seen=seen)
         if progress is not None:
             progress(label, done, len(folders))
-    emit_material_event(settings, summary.new_material_ids)
+    if events is not None:
+        events.materials_added(summary.new_material_ids)
     # previews for this batch, and for materials still without one (e.g. ingested before any envmap)
     pending = (summary.added + summary.replaced
                + [i for i in materials_without_preview(url) if i in summary.present]) if previews else []

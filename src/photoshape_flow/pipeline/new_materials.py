@@ -16,8 +16,8 @@ from sqlalchemy.orm import Session
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.runner import Profile, get_profile
 from photoshape_flow.pipeline.training import material_set, newest_material_classifier
+from photoshape_flow.profiles import Profile, get_profile
 
 log = logging.getLogger(__name__)
 
@@ -53,11 +53,12 @@ def run_new_materials(profile: str | Profile = "default", renders_per_material: 
     if not new_ids:
         log.info("new materials: none since classifier %s", previous_id)
         return {"new_materials": [], "classifier_id": previous_id}
-    target = max(existing, prof.training_count) + renders_per_material * len(new_ids)
-    renders = run_training_renders("training", target, prof.training_size, prof.training_spp, settings)
-    classifier_id = run_training(prof.classifier_config, settings=settings,
-                                 overrides=dict(prof.classifier_overrides) or None)
-    inference = run_inference("classifier", classifier_id=classifier_id, top_k=prof.top_k, settings=settings)
+    renders_cfg = prof.training_renders
+    target = max(existing, renders_cfg.count) + renders_per_material * len(new_ids)
+    renders = run_training_renders("training", target, renders_cfg.size, renders_cfg.spp, settings)
+    classifier_id = run_training(prof.training, settings=settings)
+    inference = run_inference("classifier", classifier_id=classifier_id, top_k=prof.inference.top_k,
+                              settings=settings)
     return {
         "new_materials": new_ids,
         "previous_classifier_id": previous_id,

@@ -1,4 +1,8 @@
-"""Per-stage progress (done / pending / failed) computed from the rows each stage records."""
+"""Per-stage progress (done / pending / failed) computed from the rows each stage records.
+
+One counter per stage; the stage registry (`photoshape_flow.stages`) names each stage's counter and
+`stages.stage_progress` runs them in pipeline order.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,6 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
-from photoshape_flow.vocab import STAGES
 
 # the `descriptor` of every feature row coarse alignment writes (`HogParams.name`: hog-<channels>)
 COARSE_DESCRIPTOR_PREFIX = "hog-"
@@ -27,7 +30,8 @@ def _count(session: Session, query: sa.Select) -> int:
     return int(session.execute(sa.select(sa.func.count()).select_from(query.subquery())).scalar_one())
 
 
-def _active_pairs() -> sa.Select:
+def active_pairs() -> sa.Select:
+    """Pairs most stages work on: no exclusion on the pair, its shape or its exemplar."""
     return (
         sa.select(m.Pair.id)
         .join(m.Shape, m.Shape.id == m.Pair.shape_id)
@@ -36,16 +40,27 @@ def _active_pairs() -> sa.Select:
     )
 
 
-def stage_progress(session: Session) -> list[StageProgress]:
-    """Progress of every canonical stage, in pipeline order."""
-    out: dict[str, StageProgress] = {}
+def _aligned_ok() -> sa.Select:
+    return sa.select(m.Alignment.pair_id).where(m.Alignment.status == "ok")
 
+
+def _with_substance() -> sa.Select:
+    return sa.select(m.PartSubstance.pair_id)
+
+
+def _inferred() -> sa.Select:
+    return sa.select(m.Assignment.pair_id).where(m.Assignment.method == "classifier")
+
+
+def ingest_progress(session: Session) -> StageProgress:
     ok_items = failed_items = 0
     for model in (m.Shape, m.Exemplar, m.Material, m.Envmap):
         ok_items += _count(session, sa.select(model.id).where(model.status == "ok"))
         failed_items += _count(session, sa.select(model.id).where(model.status != "ok"))
-    out["ingest"] = StageProgress("ingest", "items", ok_items, 0, failed_items)
+    return StageProgress("ingest", "items", ok_items, 0, failed_items)
 
+
+def coarse_alignment_progress(session: Session) -> StageProgress:
     # only the descriptors coarse alignment writes: ingest records `dedupe-hog` for every exemplar
     view_features = sa.select(m.ViewFeature.shape_id).where(
         m.ViewFeature.descriptor.startswith(COARSE_DESCRIPTOR_PREFIX)
@@ -66,25 +81,28 @@ def stage_progress(session: Session) -> list[StageProgress]:
         session, exemplars_ok.where(m.Exemplar.id.in_(ex_failed))
     )
     total = _count(session, shapes_ok) + _count(session, exemplars_ok)
-    out["coarse-alignment"] = StageProgress(
-        "coarse-alignment", "shapes+exemplars", done, max(total - done - failed, 0), failed
-    )
+    return StageProgress("coarse-alignment", "shapes+exemplars", done, max(total - done - failed, 0), failed)
 
-    pairs = _active_pairs()
-    aligned_ok = sa.select(m.Alignment.pair_id).where(m.Alignment.status == "ok")
+
+def fine_alignment_progress(session: Session) -> StageProgress:
+    pairs = active_pairs()
     aligned_failed = sa.select(m.Alignment.pair_id).where(m.Alignment.status != "ok")
     n_pairs = _count(session, pairs)
-    done = _count(session, pairs.where(m.Pair.id.in_(aligned_ok)))
-    failed = _count(session, pairs.where(m.Pair.id.in_(aligned_failed), m.Pair.id.not_in(aligned_ok)))
-    out["fine-alignment"] = StageProgress("fine-alignment", "pairs", done, n_pairs - done - failed, failed)
+    done = _count(session, pairs.where(m.Pair.id.in_(_aligned_ok())))
+    failed = _count(session, pairs.where(m.Pair.id.in_(aligned_failed), m.Pair.id.not_in(_aligned_ok())))
+    return StageProgress("fine-alignment", "pairs", done, n_pairs - done - failed, failed)
 
-    with_substance = sa.select(m.PartSubstance.pair_id)
-    done = _count(session, pairs.where(m.Pair.id.in_(with_substance)))
-    pending = _count(session, pairs.where(m.Pair.id.in_(aligned_ok), m.Pair.id.not_in(with_substance)))
-    out["substances"] = StageProgress("substances", "pairs", done, pending, 0)
 
+def substances_progress(session: Session) -> StageProgress:
+    pairs = active_pairs()
+    done = _count(session, pairs.where(m.Pair.id.in_(_with_substance())))
+    pending = _count(session, pairs.where(m.Pair.id.in_(_aligned_ok()), m.Pair.id.not_in(_with_substance())))
+    return StageProgress("substances", "pairs", done, pending, 0)
+
+
+def training_renders_progress(session: Session) -> StageProgress:
     renders = sa.select(m.Rendering.id).where(m.Rendering.kind.in_(("bootstrap", "training")))
-    out["training-renders"] = StageProgress(
+    return StageProgress(
         "training-renders",
         "renderings",
         _count(session, renders.where(m.Rendering.status == "ok")),
@@ -92,8 +110,10 @@ def stage_progress(session: Session) -> list[StageProgress]:
         _count(session, renders.where(m.Rendering.status != "ok")),
     )
 
+
+def training_progress(session: Session) -> StageProgress:
     classifiers = sa.select(m.Classifier.id)
-    out["training"] = StageProgress(
+    return StageProgress(
         "training",
         "classifiers",
         _count(session, classifiers.where(m.Classifier.status == "ok")),
@@ -101,21 +121,24 @@ def stage_progress(session: Session) -> list[StageProgress]:
         _count(session, classifiers.where(m.Classifier.status == "failed")),
     )
 
-    inferred = sa.select(m.Assignment.pair_id).where(m.Assignment.method == "classifier")
-    done = _count(session, pairs.where(m.Pair.id.in_(inferred)))
-    pending = _count(session, pairs.where(m.Pair.id.in_(with_substance), m.Pair.id.not_in(inferred)))
-    out["inference"] = StageProgress("inference", "pairs", done, pending, 0)
 
+def inference_progress(session: Session) -> StageProgress:
+    pairs = active_pairs()
+    done = _count(session, pairs.where(m.Pair.id.in_(_inferred())))
+    pending = _count(session, pairs.where(m.Pair.id.in_(_with_substance()), m.Pair.id.not_in(_inferred())))
+    return StageProgress("inference", "pairs", done, pending, 0)
+
+
+def publish_progress(session: Session) -> StageProgress:
+    pairs = active_pairs()
     published = sa.select(m.Rendering.pair_id).where(m.Rendering.kind == "photoshape", m.Rendering.status == "ok")
     publish_failed = sa.select(m.Rendering.pair_id).where(
         m.Rendering.kind == "photoshape", m.Rendering.status != "ok"
     )
     done = _count(session, pairs.where(m.Pair.id.in_(published)))
     failed = _count(session, pairs.where(m.Pair.id.in_(publish_failed), m.Pair.id.not_in(published)))
-    pending = _count(session, pairs.where(m.Pair.id.in_(inferred), m.Pair.id.not_in(published)))
-    out["publish"] = StageProgress("publish", "pairs", done, max(pending - failed, 0), failed)
-
-    return [out[name] for name in STAGES]
+    pending = _count(session, pairs.where(m.Pair.id.in_(_inferred()), m.Pair.id.not_in(published)))
+    return StageProgress("publish", "pairs", done, max(pending - failed, 0), failed)
 
 
 def table_counts(session: Session) -> dict[str, dict[str, int]]:

@@ -29,11 +29,13 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import sqlalchemy as sa
 
+from photoshape_flow.classify.substance_configs import SubstanceTrainConfig, get_config
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -98,7 +100,7 @@ def _load_label_map(store: BlobStore, ref: str) -> np.ndarray:
 
 
 def train_or_resume(
-    settings: Settings, train_config: str = "cpu", **overrides: Any
+    settings: Settings, train_config: str | SubstanceTrainConfig = "cpu", **overrides: Any
 ) -> tuple[int, Any, dict[str, Any]]:
     """Train the substance network (or resume / reuse it); returns (classifier_id, model, info)."""
     import torch
@@ -106,7 +108,6 @@ def train_or_resume(
     from photoshape_flow.classify.substance_train import (
         checkpoint_from_bytes,
         checkpoint_to_bytes,
-        get_config,
         load_model,
         resolve_device,
         train_substance_net,
@@ -117,7 +118,8 @@ def train_or_resume(
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
     device = resolve_device(settings.device)
-    config = get_config(train_config, device=device, seed=settings.seed, **overrides)
+    base = train_config if isinstance(train_config, SubstanceTrainConfig) else get_config(train_config)
+    config = replace(base, device=device, seed=settings.seed, **overrides)
     name = f"substance-{config.preset}"
     with session_scope(url) as session:
         train, val, data_hash = load_bootstrap_data(session, store)
@@ -380,7 +382,7 @@ def run_substances(
     bootstrap_count: int = 400,
     size: int = 128,
     spp: int = 32,
-    train_config: str = "cpu",
+    train_config: str | SubstanceTrainConfig = "cpu",
     *,
     batch: int = 16,
     train_overrides: dict[str, Any] | None = None,

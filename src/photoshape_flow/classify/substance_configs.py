@@ -1,0 +1,67 @@
+"""Configurations of the substance network's training, importable without torch.
+
+Profiles (`photoshape_flow.profiles`) nest a `SubstanceTrainConfig` per profile; the presets here are
+the starting points they are built from: "tiny" (CI: a few iterations at 32 px), "cpu" (the demo:
+128 px, 30 epochs; ~75 img/s on 2 idle cores) and "gpu" (192 px, width 32, 60 epochs, batch 64).
+The device is always replaced by the resolved `settings.device` when training starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+# the network family's name (classify/substance_net.py builds it); stored on the Classifier row
+SUBSTANCE_ARCHITECTURE = "substance-unet-res"
+
+
+@dataclass(frozen=True)
+class SubstanceTrainConfig:
+    preset: str = "cpu"
+    size: int = 128
+    width: int = 16
+    epochs: int = 30
+    batch_size: int = 16
+    iters_per_epoch: int | None = None  # None: one pass over the training images
+    lr: float = 2e-3
+    min_lr_fraction: float = 0.05
+    weight_decay: float = 1e-4
+    crop_scale: tuple[float, float] = (0.55, 1.0)
+    flip: bool = True
+    jitter: float = 0.25
+    blur: float = 0.0  # maximum Gaussian sigma (source pixels) of a random blur before the crop; 0: off
+    frame_object: bool = False  # crop renders to the square around the object, as exemplars are cropped
+    class_balance: bool = True
+    seed: int = 0
+    device: str = "cpu"
+
+    @property
+    def architecture(self) -> str:
+        return f"{SUBSTANCE_ARCHITECTURE}-w{self.width}"
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["crop_scale"] = list(self.crop_scale)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SubstanceTrainConfig:
+        values = dict(data)
+        if "crop_scale" in values:
+            values["crop_scale"] = tuple(values["crop_scale"])
+        known = set(cls.__dataclass_fields__)
+        return cls(**{k: v for k, v in values.items() if k in known})
+
+
+PRESETS: dict[str, SubstanceTrainConfig] = {
+    "tiny": SubstanceTrainConfig(preset="tiny", size=32, width=8, epochs=2, batch_size=4, iters_per_epoch=3),
+    "cpu": SubstanceTrainConfig(preset="cpu", size=128, width=16, epochs=30, batch_size=16),
+    "gpu": SubstanceTrainConfig(preset="gpu", size=192, width=32, epochs=60, batch_size=64, lr=3e-3, device="cuda"),
+}
+
+
+def get_config(name: str, **overrides: Any) -> SubstanceTrainConfig:
+    """A preset by name with field overrides (e.g. device resolved from settings)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown substance training preset {name!r}; choose from {sorted(PRESETS)}")
+    return replace(PRESETS[name], **overrides)

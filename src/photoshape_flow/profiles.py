@@ -1,0 +1,272 @@
+"""Typed profiles: every knob of a pipeline run that trades quality for time, one dataclass per stage.
+
+A `Profile` nests one frozen config per stage; the classifier's and the substance network's training
+configurations are fields of it (`training`, `substances.network`), built from their presets, so a
+profile is the single table a run reads. `tiny` (CI, seconds), `small` (the README demo: the whole
+pipeline on 2 CPU cores in minutes), `medium` (accuracy figures mean something), `default` (real
+collections on a CPU machine) and `paper` (the paper's settings, for a GPU machine).
+
+Overrides use dotted paths (`training.epochs=3`, `publish.formats=glb,obj`) and are validated
+against the field types, so a typo fails before any work starts. `ResolvedProfile` keeps the name
+and the overrides next to the resulting profile: that is what a run records in `pipeline_run`.
+This module imports no torch, database or Prefect code, so the CLI and flows can load it cheaply.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from photoshape_flow.classify.configs import CONFIGS as CLASSIFIER_PRESETS
+from photoshape_flow.classify.configs import ClassifierConfig
+from photoshape_flow.classify.substance_configs import PRESETS as SUBSTANCE_PRESETS
+from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
+from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS
+from photoshape_flow.vocab import ASSIGNMENT_METHODS
+
+
+class ProfileError(ValueError):
+    """An unknown profile name or an override that does not fit the profile's fields."""
+
+
+@dataclass(frozen=True)
+class IngestConfig:
+    """Sizes of what ingest derives from each input."""
+
+    exemplar_size: int = 512  # stored exemplar crop (pixels, square)
+    previews: bool = True  # render a preview of every new material
+    preview_size: int = 128
+
+
+@dataclass(frozen=True)
+class CoarseAlignmentConfig:
+    """Retrieval breadth (section 4.1): the reverse index keeps `exemplar_topk` shapes per exemplar."""
+
+    exemplar_topk: int = 8
+    shape_topn: int = 12  # exemplars kept per shape (paper: 12)
+
+
+@dataclass(frozen=True)
+class FineAlignmentConfig:
+    """Working resolution of the flow warp and the dense CRF (section 4.2)."""
+
+    size: int = 320
+
+
+@dataclass(frozen=True)
+class SubstancesConfig:
+    """Bootstrap renders and the substance network trained on them (section 4.3)."""
+
+    bootstrap_count: int = 2000
+    size: int = 128
+    spp: int = 32
+    network: SubstanceTrainConfig = SUBSTANCE_PRESETS["cpu"]
+
+
+@dataclass(frozen=True)
+class TrainingRendersConfig:
+    """Randomized renders conditioned on the part substances (section 5.1)."""
+
+    count: int = 4000
+    size: int = 128
+    spp: int = 32
+
+
+@dataclass(frozen=True)
+class InferenceConfig:
+    """How many materials each part keeps, and which methods rank them (ours and the baselines)."""
+
+    top_k: int = 5
+    methods: tuple[str, ...] = ASSIGNMENT_METHODS
+
+    def __post_init__(self) -> None:
+        unknown = [m for m in self.methods if m not in ASSIGNMENT_METHODS]
+        if unknown:
+            raise ProfileError(f"inference.methods: unknown method {unknown[0]!r}; "
+                               f"choose from {', '.join(ASSIGNMENT_METHODS)}")
+
+
+@dataclass(frozen=True)
+class PublishConfig:
+    """Which pairs become PhotoShapes and at what quality they are rendered and exported."""
+
+    max_rank: int = 12  # publish pairs up to this rank per shape
+    views: int = 8
+    size: int = 256
+    spp: int = 64
+    formats: tuple[str, ...] = DEFAULT_FORMATS
+
+    def __post_init__(self) -> None:
+        unknown = [f for f in self.formats if f not in EXPORTERS]
+        if unknown:
+            raise ProfileError(f"publish.formats: unknown format {unknown[0]!r}; choose from {', '.join(EXPORTERS)}")
+
+
+@dataclass(frozen=True)
+class Profile:
+    """One config per stage (attribute = stage name with '_' for '-')."""
+
+    name: str
+    ingest: IngestConfig = field(default_factory=IngestConfig)
+    coarse_alignment: CoarseAlignmentConfig = field(default_factory=CoarseAlignmentConfig)
+    fine_alignment: FineAlignmentConfig = field(default_factory=FineAlignmentConfig)
+    substances: SubstancesConfig = field(default_factory=SubstancesConfig)
+    training_renders: TrainingRendersConfig = field(default_factory=TrainingRendersConfig)
+    training: ClassifierConfig = CLASSIFIER_PRESETS["cpu"]
+    inference: InferenceConfig = field(default_factory=InferenceConfig)
+    publish: PublishConfig = field(default_factory=PublishConfig)
+
+    def stage_config(self, stage: str) -> Any:
+        """The config of `stage` (a canonical stage name such as 'fine-alignment')."""
+        return getattr(self, stage.replace("-", "_"))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON (tuples as lists), the form stored with each run."""
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+
+_CPU_CLASSIFIER = CLASSIFIER_PRESETS["cpu"]
+_CPU_SUBSTANCES = SUBSTANCE_PRESETS["cpu"]
+
+PROFILES: dict[str, Profile] = {
+    "tiny": Profile(
+        name="tiny",
+        coarse_alignment=CoarseAlignmentConfig(exemplar_topk=2, shape_topn=4),
+        fine_alignment=FineAlignmentConfig(size=96),
+        substances=SubstancesConfig(bootstrap_count=24, size=48, spp=4, network=SUBSTANCE_PRESETS["tiny"]),
+        training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
+        training=CLASSIFIER_PRESETS["tiny"],
+        inference=InferenceConfig(top_k=3),
+        publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
+    ),
+    "small": Profile(
+        name="small",
+        coarse_alignment=CoarseAlignmentConfig(exemplar_topk=3, shape_topn=6),
+        fine_alignment=FineAlignmentConfig(size=192),
+        substances=SubstancesConfig(bootstrap_count=160, size=96, spp=16, network=replace(_CPU_SUBSTANCES, epochs=20)),
+        training_renders=TrainingRendersConfig(count=320, size=96, spp=16),
+        training=replace(_CPU_CLASSIFIER, epochs=4),
+        publish=PublishConfig(max_rank=1, views=8, size=160, spp=32),
+    ),
+    "medium": Profile(
+        name="medium",
+        coarse_alignment=CoarseAlignmentConfig(exemplar_topk=4, shape_topn=12),
+        fine_alignment=FineAlignmentConfig(size=256),
+        substances=SubstancesConfig(bootstrap_count=1200, size=128, spp=32,
+                                    network=replace(_CPU_SUBSTANCES, epochs=60)),
+        training_renders=TrainingRendersConfig(count=3000, size=128, spp=32),
+        training=replace(_CPU_CLASSIFIER, epochs=12, max_steps_per_epoch=80, image_size=128),
+        publish=PublishConfig(max_rank=1, views=8, size=256, spp=64),
+    ),
+    "default": Profile(name="default"),
+    "paper": Profile(
+        name="paper",
+        coarse_alignment=CoarseAlignmentConfig(exemplar_topk=8, shape_topn=12),
+        fine_alignment=FineAlignmentConfig(size=500),
+        substances=SubstancesConfig(bootstrap_count=20000, size=256, spp=128, network=SUBSTANCE_PRESETS["gpu"]),
+        training_renders=TrainingRendersConfig(count=156000, size=384, spp=256),
+        training=CLASSIFIER_PRESETS["paper"],
+        inference=InferenceConfig(top_k=10),
+        publish=PublishConfig(max_rank=12, size=1280, spp=256),
+    ),
+}
+
+
+@dataclass(frozen=True)
+class ResolvedProfile:
+    """A named profile with validated overrides applied: what a run uses and records."""
+
+    name: str
+    overrides: tuple[tuple[str, str], ...]
+    profile: Profile
+
+    def record(self) -> dict[str, Any]:
+        """The JSON stored with a run: name, overrides as given, every resolved value."""
+        return {"name": self.name, "overrides": dict(self.overrides), "profile": self.profile.to_dict()}
+
+
+def get_profile(name: str | Profile) -> Profile:
+    """A profile by name (a Profile passes through)."""
+    if isinstance(name, Profile):
+        return name
+    if name not in PROFILES:
+        raise ProfileError(f"unknown profile {name!r}; choose from {', '.join(PROFILES)}")
+    return PROFILES[name]
+
+
+def resolve_profile(name: str | Profile, overrides: Sequence[str] | Mapping[str, Any] = ()) -> ResolvedProfile:
+    """`name` with `overrides` ('path=value' strings, or a {path: value} mapping) applied and validated."""
+    profile = get_profile(name)
+    items = list(overrides.items()) if isinstance(overrides, Mapping) else [_split(text) for text in overrides]
+    for path, value in items:
+        profile = _set(profile, path.split("."), value, path)
+    pairs = tuple((path, value if isinstance(value, str) else json.dumps(value)) for path, value in items)
+    return ResolvedProfile(profile.name, pairs, profile)
+
+
+def _split(text: str) -> tuple[str, str]:
+    path, sep, value = text.partition("=")
+    if not sep or not path.strip():
+        raise ProfileError(f"override {text!r} is not of the form section.field=value")
+    return path.strip(), value.strip()
+
+
+def _set(obj: Any, keys: list[str], value: Any, path: str) -> Any:
+    """A copy of dataclass `obj` with the field at `keys` set to `value` (coerced to the field's type)."""
+    if not dataclasses.is_dataclass(obj):
+        raise ProfileError(f"{path}: {type(obj).__name__} has no fields to set")
+    hints = typing.get_type_hints(type(obj))
+    names = {f.name for f in dataclasses.fields(obj) if f.init}
+    key = keys[0]
+    if key not in names or key == "name" and obj.__class__ is Profile:
+        choices = ", ".join(sorted(n for n in names if not (n == "name" and obj.__class__ is Profile)))
+        raise ProfileError(f"{path}: no field {key!r} (choose from {choices})")
+    if len(keys) > 1:
+        return replace(obj, **{key: _set(getattr(obj, key), keys[1:], value, path)})
+    return replace(obj, **{key: _coerce(value, hints[key], path)})
+
+
+def _coerce(value: Any, hint: Any, path: str) -> Any:
+    """`value` (a string from the command line, or JSON-like) as an instance of type `hint`."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        if value is None or (isinstance(value, str) and value.lower() in ("none", "null")):
+            if type(None) in args:
+                return None
+        errors = []
+        for arg in (a for a in args if a is not type(None)):
+            try:
+                return _coerce(value, arg, path)
+            except ProfileError as exc:
+                errors.append(str(exc))
+        raise ProfileError(errors[0] if errors else f"{path}: cannot be None")
+    if origin is tuple:
+        parts = value if isinstance(value, list | tuple) else [p for p in str(value).split(",") if p.strip()]
+        inner = args[0] if args and (len(args) == 2 and args[1] is Ellipsis) else None
+        if inner is None and args and len(args) != len(parts):
+            raise ProfileError(f"{path}: expected {len(args)} comma-separated values, got {len(parts)}")
+        kinds = [inner] * len(parts) if inner is not None else list(args) or [str] * len(parts)
+        values = [p.strip() if isinstance(p, str) else p for p in parts]
+        return tuple(_coerce(v, k, path) for v, k in zip(values, kinds, strict=True))
+    if hint is bool:
+        if isinstance(value, bool):
+            return value
+        text = str(value).lower()
+        if text in ("1", "true", "yes", "on"):
+            return True
+        if text in ("0", "false", "no", "off"):
+            return False
+        raise ProfileError(f"{path}: {value!r} is not a boolean (true/false)")
+    if hint in (int, float, str):
+        if hint is int and isinstance(value, float) and not value.is_integer():
+            raise ProfileError(f"{path}: {value!r} is not an integer")
+        try:
+            return hint(value)
+        except (TypeError, ValueError):
+            raise ProfileError(f"{path}: {value!r} is not a valid {hint.__name__}") from None
+    raise ProfileError(f"{path}: fields of type {hint} cannot be set from the command line")

@@ -1,0 +1,76 @@
+"""Stage `coarse-alignment` (section 4.1): view and exemplar descriptors, then exact retrieval -> pairs.
+
+It fans out over two parts, shapes (viewpoint sweeps, the heavy part) and exemplars; `finish`
+searches all descriptors and rewrites the pairs of the shapes whose neighbours changed.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import sqlalchemy as sa
+
+from photoshape_flow.profiles import CoarseAlignmentConfig
+from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.work import WorkUnit
+
+NAME = "coarse-alignment"
+
+
+def _config(cfg: CoarseAlignmentConfig) -> Any:
+    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig
+
+    return CoarseConfig(exemplar_topk=cfg.exemplar_topk, shape_topn=cfg.shape_topn)
+
+
+def _features_report(part: str, counts: dict[str, Any]) -> StageReport:
+    return StageReport(NAME, done=int(counts["computed"]), skipped=int(counts["skipped"]),
+                       failed=int(counts["failed"]), seconds=float(counts.get("seconds") or 0.0),
+                       details={part: {k: v for k, v in counts.items() if k != "errors"}})
+
+
+def plan(ctx: StageContext, cfg: CoarseAlignmentConfig) -> list[WorkUnit]:
+    from photoshape_flow.db import models as m
+
+    units = []
+    with ctx.session() as session:
+        for part, model in (("shapes", m.Shape), ("exemplars", m.Exemplar)):
+            ids = session.execute(
+                sa.select(model.id).where(model.status == "ok", ~model.exclude).order_by(model.id)
+            ).scalars()
+            units.append(WorkUnit(part, tuple(ids)))
+    return units
+
+
+def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = None) -> StageReport:
+    from photoshape_flow.pipeline import coarse_alignment as coarse
+
+    config = _config(cfg)
+    if work is None:
+        start = time.perf_counter()
+        report = _features_report("shapes", coarse.compute_view_features(
+            config=config, settings=ctx.settings, renderer=ctx.renderer))
+        report = report.merge(_features_report("exemplars", coarse.compute_exemplar_features(
+            config=config, settings=ctx.settings)))
+        report = report.merge(finish(ctx, cfg))
+        report.seconds = time.perf_counter() - start
+        return report
+    if work.part == "shapes":
+        counts = coarse.compute_view_features(list(work.ids), config=config, settings=ctx.settings,
+                                              renderer=ctx.renderer)
+    elif work.part == "exemplars":
+        counts = coarse.compute_exemplar_features(list(work.ids), config=config, settings=ctx.settings)
+    else:
+        raise ValueError(f"{NAME} has no part {work.part!r}")
+    return _features_report(work.part, counts)
+
+
+def finish(ctx: StageContext, cfg: CoarseAlignmentConfig) -> StageReport:
+    """Exact retrieval over all descriptors, inverted into per-shape pairs."""
+    from photoshape_flow.pipeline.coarse_alignment import compute_pairs
+
+    start = time.perf_counter()
+    pairs = compute_pairs(config=_config(cfg), settings=ctx.settings)
+    return StageReport(NAME, seconds=time.perf_counter() - start, details={"pairs": pairs})

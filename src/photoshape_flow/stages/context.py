@@ -1,0 +1,66 @@
+"""What a stage needs from its caller, in one object: settings, store, sessions, device, sinks.
+
+The CLI and the flows each build one (`StageContext.create`) with their own progress and event
+sinks, so a stage never asks where it runs: the CLI shows progress bars and sends events to the
+configured Prefect API, a flow updates progress artifacts, a test records what was reported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+from sqlalchemy.orm import Session
+
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.events import NO_EVENTS, EventSink
+from photoshape_flow.store import BlobStore
+
+# (label of the item just finished, items done, items in all): the signature ingest already reports
+ProgressSink = Callable[[str, int, int], None]
+
+
+def no_progress(label: str, done: int, total: int) -> None:
+    """The progress sink of runs nobody watches."""
+
+
+@dataclass(frozen=True)
+class StageContext:
+    """Everything a stage reads besides its config; immutable, cheap to build, safe to share."""
+
+    settings: Settings
+    progress: ProgressSink = no_progress
+    events: EventSink = NO_EVENTS
+    renderer: Any = None  # None: each stage makes its own (tests inject a shared or fake one)
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def create(cls, settings: Settings | None = None, **kwargs: Any) -> StageContext:
+        return cls(settings=settings or get_settings(), **kwargs)
+
+    @cached_property
+    def store(self) -> BlobStore:
+        return BlobStore(self.settings.blob_root)
+
+    @property
+    def database_url(self) -> str:
+        return self.settings.resolved_database_url
+
+    def session(self) -> AbstractContextManager[Session]:
+        """A transaction: committed when the block ends, rolled back on an exception."""
+        from photoshape_flow.db.session import session_scope
+
+        return session_scope(self.database_url)
+
+    @property
+    def device(self) -> str:
+        """The configured torch device name ("auto", "cpu", "cuda"); trainers resolve it."""
+        return self.settings.device
+
+
+def iter_batches(ids: list[int], size: int) -> Iterator[list[int]]:
+    for start in range(0, len(ids), max(size, 1)):
+        yield ids[start : start + size]

@@ -1,0 +1,32 @@
+"""Stage `fine-alignment` (section 4.2): each pair's part map flow-warped onto its exemplar, CRF-cleaned."""
+
+from __future__ import annotations
+
+import time
+
+from photoshape_flow.pipeline.progress import active_pairs
+from photoshape_flow.profiles import FineAlignmentConfig
+from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.work import WorkUnit
+
+NAME = "fine-alignment"
+
+
+def plan(ctx: StageContext, cfg: FineAlignmentConfig) -> list[WorkUnit]:
+    from photoshape_flow.db import models as m
+
+    with ctx.session() as session:
+        return [WorkUnit("pairs", tuple(session.execute(active_pairs().order_by(m.Pair.id)).scalars()))]
+
+
+def run(ctx: StageContext, cfg: FineAlignmentConfig, work: WorkUnit | None = None) -> StageReport:
+    from photoshape_flow.align.fine import FineParams
+    from photoshape_flow.pipeline.fine_alignment import run_fine_alignment
+
+    start = time.perf_counter()
+    summary = run_fine_alignment(None if work is None else list(work.ids), ctx.settings,
+                                 params=FineParams(size=cfg.size), renderer=ctx.renderer)
+    return StageReport(NAME, done=int(summary["aligned"]), skipped=int(summary["up_to_date"]),
+                       failed=int(summary["failed"]), seconds=time.perf_counter() - start,
+                       details={"failures": summary.get("failures", [])[:20]})

@@ -1,0 +1,66 @@
+"""Stage `ingest`: the four collections into rows and blobs, envmaps first so previews can render."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from photoshape_flow.profiles import IngestConfig
+from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.report import StageReport
+
+COLLECTIONS: tuple[str, ...] = ("envmaps", "materials", "shapes", "exemplars")  # previews need envmaps
+
+
+@dataclass(frozen=True)
+class IngestRequest:
+    """What to ingest: folders or files per collection (default: the inbox), and their provenance."""
+
+    roots: Mapping[str, Sequence[Path]] | None = None
+    source: str | None = None
+    license: str | None = None
+    attribution: str | None = None
+
+
+def inbox(ctx: StageContext) -> Path:
+    """Where `photoshape run ingest` looks: <data_root>/inbox/{envmaps,materials,shapes,exemplars}."""
+    return ctx.settings.data_root / "inbox"
+
+
+def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None) -> StageReport:
+    from photoshape_flow.pipeline import ingest
+
+    request = work or IngestRequest()
+    roots = request.roots
+    if roots is None:
+        roots = {name: [inbox(ctx) / name] for name in COLLECTIONS if (inbox(ctx) / name).is_dir()}
+    start = time.perf_counter()
+    report = StageReport("ingest")
+    for name in COLLECTIONS:
+        paths = [Path(p) for p in roots.get(name, [])]
+        if not paths:
+            continue
+        kwargs: dict[str, Any] = {"settings": ctx.settings, "progress": ctx.progress}
+        if request.source is not None and name != "envmaps":
+            kwargs["source"] = request.source
+        for key in ("license", "attribution"):
+            if getattr(request, key) is not None:
+                kwargs[key] = getattr(request, key)
+        if name == "exemplars":
+            kwargs["size"] = cfg.exemplar_size
+        if name == "materials":
+            kwargs.update(previews=cfg.previews, preview_size=cfg.preview_size, events=ctx.events)
+        function = getattr(ingest, f"ingest_{name}")
+        summary = function(paths, **kwargs)
+        report = report.merge(StageReport(
+            "ingest", done=len(summary.added) + len(summary.replaced), skipped=len(summary.present),
+            rejected=len(summary.rejected),
+            details={name: {"added": len(summary.added), "present": len(summary.present),
+                            "replaced": len(summary.replaced),
+                            "rejected": [f"{path}: {reason}" for path, reason in summary.rejected]}},
+        ))
+    report.seconds = time.perf_counter() - start
+    return report

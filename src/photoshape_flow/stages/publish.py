@@ -1,0 +1,54 @@
+"""Stage `publish`: PhotoShape renders and exports of the best pairs of every shape, then the gallery."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import sqlalchemy as sa
+
+from photoshape_flow.profiles import PublishConfig
+from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.work import WorkUnit
+
+NAME = "publish"
+
+
+def gallery_dir(ctx: StageContext) -> Path:
+    return ctx.settings.data_root / "gallery"
+
+
+def plan(ctx: StageContext, cfg: PublishConfig) -> list[WorkUnit]:
+    """Pairs up to the configured rank of their shape (excluded pairs never)."""
+    from photoshape_flow.db import models as m
+
+    with ctx.session() as session:
+        ids = session.execute(
+            sa.select(m.Pair.id).where(m.Pair.rank <= cfg.max_rank, ~m.Pair.exclude).order_by(m.Pair.id)
+        ).scalars()
+        return [WorkUnit("pairs", tuple(ids))]
+
+
+def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> StageReport:
+    from photoshape_flow.pipeline.publish import run_publish
+
+    start = time.perf_counter()
+    ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
+    summary = run_publish(ids, None, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
+                          formats=cfg.formats)
+    report = StageReport(NAME, done=summary.rendered, skipped=summary.skipped, failed=summary.failed,
+                         seconds=time.perf_counter() - start, details={"publish": summary.as_dict()})
+    if work is None:
+        report = report.merge(finish(ctx, cfg))
+        report.seconds = time.perf_counter() - start
+    return report
+
+
+def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
+    """The gallery site over everything published so far."""
+    from photoshape_flow.pipeline.gallery_site import write_gallery_site
+
+    start = time.perf_counter()
+    index = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
+    return StageReport(NAME, seconds=time.perf_counter() - start, details={"gallery": str(index)})

@@ -1,0 +1,68 @@
+"""What every stage returns: one dataclass the CLI tables, the Prefect artifacts and the claims read."""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Blocked:
+    """Items left pending because another live worker holds them."""
+
+    count: int = 0
+    holders: tuple[str, ...] = ()
+    until: dt.datetime | None = None
+
+
+@dataclass
+class StageReport:
+    """Counts of one stage run (or one batch of it), its wall time, and stage-specific details.
+
+    done: items computed now; skipped: already up to date; failed: crashed (recorded, retried next
+    run); rejected: bad input (recorded, not retried until it changes); blocked: held elsewhere.
+    """
+
+    stage: str
+    done: int = 0
+    skipped: int = 0
+    failed: int = 0
+    rejected: int = 0
+    blocked: Blocked = field(default_factory=Blocked)
+    seconds: float = 0.0
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def merge(self, other: StageReport) -> StageReport:
+        """The sum of two reports of the same stage (batches of one run); details keyed by part."""
+        until = max((u for u in (self.blocked.until, other.blocked.until) if u is not None), default=None)
+        return StageReport(
+            stage=self.stage,
+            done=self.done + other.done,
+            skipped=self.skipped + other.skipped,
+            failed=self.failed + other.failed,
+            rejected=self.rejected + other.rejected,
+            blocked=Blocked(self.blocked.count + other.blocked.count,
+                            tuple(dict.fromkeys(self.blocked.holders + other.blocked.holders)), until),
+            seconds=self.seconds + other.seconds,
+            details={**self.details, **other.details},
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly (Prefect task results, the `pipeline_run` row)."""
+        return _plain(asdict(self))
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, dt.datetime):
+        return obj.isoformat()
+    if hasattr(obj, "__dataclass_fields__"):
+        return _plain(asdict(obj))
+    return obj

@@ -1,0 +1,24 @@
+"""Stage `training` (section 5.2): train, resume, or fine-tune the material classifier."""
+
+from __future__ import annotations
+
+import time
+
+from photoshape_flow.classify.configs import ClassifierConfig
+from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.report import StageReport
+
+NAME = "training"
+
+
+def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageReport:
+    from photoshape_flow.db import models as m
+    from photoshape_flow.pipeline.training import run_training
+
+    start = time.perf_counter()
+    classifier_id = run_training(cfg, settings=ctx.settings)
+    with ctx.session() as session:
+        clf = session.get(m.Classifier, classifier_id)
+        assert clf is not None
+        details = {"classifier_id": classifier_id, "name": clf.name, "status": clf.status, "metrics": clf.metrics}
+    return StageReport(NAME, done=1, seconds=time.perf_counter() - start, details=details)

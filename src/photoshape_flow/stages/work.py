@@ -1,0 +1,32 @@
+"""Units of work of the stages that fan out, and the claimed processing of one unit.
+
+Flows map a task over `plan_batches(...)`; each task calls `process(...)`, which claims its items in
+`work_claim` (so several workers or Dask processes never do an item twice, and a killed worker's
+items are re-claimed once its lease expires), runs the stage on the items it won and marks them
+done. Stage functions are idempotent on their own: a claim is about not wasting work and not
+racing on the same rows, never about the correctness of the stored results.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, is_dataclass
+
+from photoshape_flow.pipeline.ingest_common import stable_hash
+
+
+@dataclass(frozen=True)
+class WorkUnit:
+    """Items of one part of a stage (shapes, exemplars, pairs, or one inference method's pairs)."""
+
+    part: str
+    ids: tuple[int, ...]
+
+    def batches(self, size: int) -> list[WorkUnit]:
+        size = max(size, 1)
+        return [WorkUnit(self.part, self.ids[i : i + size]) for i in range(0, len(self.ids), size)]
+
+
+def claim_hash(stage: str, part: str, config: object) -> str:
+    """Claims are keyed by the stage's own config: a changed config re-opens its items."""
+    payload = asdict(config) if is_dataclass(config) and not isinstance(config, type) else config
+    return stable_hash({"stage": stage, "part": part, "config": payload})

@@ -1,0 +1,58 @@
+"""Typed profiles: dotted overrides are validated against the field types and recorded as given."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from photoshape_flow.classify.configs import get_config
+from photoshape_flow.profiles import PROFILES, ProfileError, resolve_profile
+from photoshape_flow.stages import REGISTRY
+
+
+def test_every_profile_has_a_config_for_every_registered_stage() -> None:
+    for profile in PROFILES.values():
+        for stage in REGISTRY:
+            assert dataclasses.is_dataclass(stage.config(profile)), (profile.name, stage.name)
+
+
+def test_presets_are_the_classifier_configs_the_old_override_dicts_built() -> None:
+    """The medium classifier must hash as before: the same named preset with the same fields changed."""
+    medium = PROFILES["medium"].training
+    assert medium == get_config("cpu", epochs=12, max_steps_per_epoch=80, image_size=128)
+    assert PROFILES["small"].substances.network.epochs == 20 and PROFILES["tiny"].training.name == "tiny"
+
+
+def test_overrides_coerce_to_the_field_types() -> None:
+    resolved = resolve_profile("small", ["training.epochs=3", "publish.formats=glb,obj",
+                                         "training.max_steps_per_epoch=none", "ingest.previews=false",
+                                         "substances.network.lr=0.01"])
+    p = resolved.profile
+    assert (p.training.epochs, p.publish.formats, p.training.max_steps_per_epoch) == (3, ("glb", "obj"), None)
+    assert p.ingest.previews is False and p.substances.network.lr == 0.01
+    assert PROFILES["small"].training.epochs == 4  # the table itself is untouched
+    record = resolved.record()
+    assert record["name"] == "small" and record["overrides"]["training.epochs"] == "3"
+    assert record["profile"]["publish"]["formats"] == ["glb", "obj"]
+    assert resolve_profile("small", record["overrides"]).profile == p  # a recorded run resolves again
+
+
+@pytest.mark.parametrize(("override", "message"), [
+    ("training.epoch=3", "no field 'epoch'"),
+    ("training.epochs=three", "not a valid int"),
+    ("training.epochs=2.5", "not a valid int"),
+    ("ingest.previews=maybe", "not a boolean"),
+    ("epochs", "section.field=value"),
+    ("publish.formats.glb=1", "no fields to set"),
+    ("name=other", "no field 'name'"),
+    ("inference.methods=classifier,magic", "unknown method 'magic'"),
+])
+def test_bad_overrides_fail_with_one_line_naming_the_path(override: str, message: str) -> None:
+    with pytest.raises(ProfileError, match=message):
+        resolve_profile("tiny", [override])
+
+
+def test_unknown_profile_names_the_choices() -> None:
+    with pytest.raises(ProfileError, match="tiny, small, medium, default, paper"):
+        resolve_profile("huge")
