@@ -26,6 +26,7 @@ from photoshape_flow.classify.configs import CONFIGS as CLASSIFIER_PRESETS
 from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.substance_configs import PRESETS as SUBSTANCE_PRESETS
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
+from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS
 from photoshape_flow.vocab import ASSIGNMENT_METHODS
 
 
@@ -98,7 +99,12 @@ class PublishConfig:
     views: int = 8
     size: int = 256
     spp: int = 64
-    formats: tuple[str, ...] = ("glb", "xml", "obj")
+    formats: tuple[str, ...] = DEFAULT_FORMATS
+
+    def __post_init__(self) -> None:
+        unknown = [f for f in self.formats if f not in EXPORTERS]
+        if unknown:
+            raise ProfileError(f"publish.formats: unknown format {unknown[0]!r}; choose from {', '.join(EXPORTERS)}")
 
 
 @dataclass(frozen=True)

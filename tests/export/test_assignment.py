@@ -7,7 +7,8 @@ import json
 import pytest
 
 from photoshape_flow.export.assignment import PartAssignment, Provenance, assignment_document
-from photoshape_flow.export.bundle import export_photoshape, parse_formats
+from photoshape_flow.export.bundle import export_photoshape
+from photoshape_flow.export.formats import parse_formats
 
 
 def _document() -> dict:

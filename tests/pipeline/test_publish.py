@@ -88,7 +88,8 @@ def test_publish_renders_exports_and_resumes(db_url, store, tmp_path):
     from photoshape_flow.config import get_settings
     from photoshape_flow.export.node_tools import ProgramMissing
     from photoshape_flow.export.validate import errors, validate_gltf
-    from photoshape_flow.pipeline.publish import export_manifest, run_publish
+    from photoshape_flow.pipeline.downloads import export_manifest
+    from photoshape_flow.pipeline.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
     mk = f"classifier:{ids['classifier']}"
@@ -134,7 +135,7 @@ def test_grade_rows_labels_and_sql(db_url, store, tmp_path):
     from typer.testing import CliRunner
 
     from photoshape_flow.cli import app
-    from photoshape_flow.pipeline.publish import record_grade
+    from photoshape_flow.pipeline.grading import record_grade
 
     ids = seed(db_url, store, tmp_path)
     runner = CliRunner()
@@ -165,7 +166,8 @@ def test_gallery_of_published_candidates(db_url, store, tmp_path):
     from photoshape_flow.cli import app
     from photoshape_flow.export.browser import check_pages, problems
     from photoshape_flow.export.node_tools import ProgramMissing
-    from photoshape_flow.pipeline.publish import record_grade, run_publish
+    from photoshape_flow.pipeline.grading import record_grade
+    from photoshape_flow.pipeline.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
     run_publish(views=1, size=16, spp=2, formats=("glb", "obj"))

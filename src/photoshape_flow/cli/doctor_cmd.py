@@ -35,7 +35,7 @@ def check_renderer() -> Check:
 
     settings = get_settings()
     try:
-        from photoshape_flow.render import check_llvm
+        from photoshape_flow.render.selftest import check_llvm
     except Exception as exc:  # the renderer package itself failed to import
         return Check("mitsuba", False, f"cannot import renderer: {exc}", "pip install mitsuba==3.9.1 drjit==1.5.0")
     ok, message = check_llvm()

@@ -1,4 +1,4 @@
-"""`photoshape export`: write the downloads of PhotoShapes (GLB, Mitsuba XML, OBJ, assignment.json)."""
+"""`photoshape export`: write the downloads of PhotoShapes (the formats of `export.formats`, assignment.json)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import typer
 from rich.table import Table
 
 from photoshape_flow.cli.common import console, fail, require_database
+from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, parse_formats
 
 
 def export(
@@ -19,15 +20,15 @@ def export(
         help="classifier (each pair's newest classifier), builtin, no-classifier, color-match, or an exact "
         "method key such as classifier:3.",
     ),
-    formats: str = typer.Option("glb,xml,obj", "--format", "-f", help="Comma-separated: glb, gltf, xml, obj."),
+    formats: str = typer.Option(",".join(DEFAULT_FORMATS), "--format", "-f",
+                                help=f"Comma-separated: {', '.join(EXPORTERS)}."),
     size: int = typer.Option(512, min=8, help="Film size written into the Mitsuba XML."),
     spp: int = typer.Option(128, min=1, help="Samples per pixel written into the Mitsuba XML."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""
     require_database()
-    from photoshape_flow.export.bundle import parse_formats
-    from photoshape_flow.pipeline.publish import export_candidates
+    from photoshape_flow.pipeline.downloads import export_candidates
 
     try:
         chosen = parse_formats(formats)

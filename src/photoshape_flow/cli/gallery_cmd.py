@@ -17,7 +17,7 @@ def gallery(
 ) -> None:
     """Write the gallery: exemplars, built-in and PhotoShape renders, materials, grades, downloads, licences."""
     require_database()
-    from photoshape_flow.pipeline.publish import write_contact_sheet, write_gallery_site
+    from photoshape_flow.pipeline.gallery_site import write_contact_sheet, write_gallery_site
 
     index = write_gallery_site(out, method)
     pages = len(list((out / "pairs").glob("*.html")))

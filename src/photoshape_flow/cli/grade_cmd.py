@@ -21,7 +21,7 @@ def grade(
     require_database()
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.publish import record_grade
+    from photoshape_flow.pipeline.grading import record_grade
 
     if label not in GRADES:
         fail(f"unknown grade {label!r}; valid grades: {', '.join(GRADES)}")

@@ -10,7 +10,7 @@ Layout::
     pairs/<slug>.html       exemplar, built-in render, PhotoShape renders, parts, downloads, licences
     materials.html          the materials used, with substance, licence and how often they were chosen
     img/                    images, named by content hash
-    downloads/<slug>/       photoshape.glb, assignment.json, and zips of the multi-file formats
+    downloads/<slug>/       single-file formats and assignment.json as they are, zips of the others
 """
 
 from __future__ import annotations
@@ -24,14 +24,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from photoshape_flow.export.formats import EXPORTERS, SIDECAR, SIDECAR_PATH
+
 GRADE_ORDER: dict[str, int] = {
     "good": 0, "acceptable": 1, "not_sure": 2, "limitation": 3, "wrong_ambiguous": 4, "wrong_color": 5,
     "wrong_material": 6, "under_segmented": 7, "over_segmented": 8, "wrong_alignment": 9, "bad_shape": 10,
     "bad_exemplar": 11,
 }
+# format -> link text, in the order the pair page lists them; a multi-file format is offered as a zip
 DOWNLOAD_LABELS: dict[str, str] = {
-    "glb": "glTF binary (.glb)", "gltf": "glTF + textures (.zip)", "xml": "Mitsuba 3 scene (.zip)",
-    "obj": "OBJ + MTL + textures (.zip)", "assignment": "assignment.json",
+    **{name: f"{e.description} ({Path(e.path).suffix if e.single_file else '.zip'})" for name, e in EXPORTERS.items()},
+    SIDECAR: SIDECAR_PATH,
 }
 
 
@@ -184,7 +187,7 @@ def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
     source = Path(source)
     folder = root / "downloads" / slug
     folder.mkdir(parents=True, exist_ok=True)
-    if fmt in ("glb", "assignment") and source.is_file():
+    if (fmt == SIDECAR or EXPORTERS[fmt].single_file) and source.is_file():
         shutil.copyfile(source, folder / source.name)
         return f"downloads/{slug}/{source.name}"
     base = source if source.is_dir() else source.parent
@@ -283,11 +286,11 @@ def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets) -> None:
         for p in entry.parts
     )
     downloads = []
-    for fmt in ("glb", "gltf", "xml", "obj", "assignment"):
+    for fmt, label in DOWNLOAD_LABELS.items():
         if fmt in entry.downloads:
             href = _download(root, entry.slug, fmt, entry.downloads[fmt])
             if href:
-                downloads.append(f'<li><a href="../{href}" download>{_e(DOWNLOAD_LABELS[fmt])}</a></li>')
+                downloads.append(f'<li><a href="../{href}" download>{_e(label)}</a></li>')
     licences = "".join(
         f"<tr><td>{_e(x.get('role'))}</td><td>{_e(x.get('name'))}</td><td>{_e(x.get('license') or 'unknown')}</td>"
         f"<td>{_e(x.get('attribution') or '')}</td><td>"

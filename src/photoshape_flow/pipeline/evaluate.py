@@ -260,7 +260,7 @@ def evaluate_inference(
         if rerender_max_pairs is not None and rerender_pairs[method_key] >= rerender_max_pairs:
             continue
         if rerenderer is None:
-            from photoshape_flow.pipeline.publish import choose_envmap
+            from photoshape_flow.pipeline.photoshapes import choose_envmap
 
             rerenderer = _Rerenderer(store, rerender_size, rerender_spp)
             rerenderer.set_envmap(choose_envmap(session))

@@ -2,7 +2,8 @@
 
 ``from photoshape_flow.render import Camera, MaterialSpec, UVTransform, EnvmapSpec, Renderer``.
 `Camera` and the specs are plain data (importing them never loads Mitsuba); `Renderer` loads
-Mitsuba on first use, via `photoshape_flow.render.runtime.ensure_mitsuba`.
+Mitsuba on first use, via `photoshape_flow.render.runtime.ensure_mitsuba`. `check_llvm` (the
+``photoshape doctor`` self-test) lives in `render.selftest`.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from photoshape_flow.render.camera import Camera
-from photoshape_flow.render.runtime import RendererUnavailableError, check_llvm
+from photoshape_flow.render.runtime import RendererUnavailableError
 from photoshape_flow.render.specs import (
     EnvmapSpec,
     MaterialSpec,
@@ -24,6 +25,7 @@ from photoshape_flow.render.specs import (
 if TYPE_CHECKING:
     from photoshape_flow.render.renderer import BeautyResult, Renderer, SweepResult
     from photoshape_flow.render.scene import SceneOptions, build_scene
+    from photoshape_flow.render.selftest import check_llvm
 
 _LAZY = {
     "Renderer": "photoshape_flow.render.renderer",
@@ -31,6 +33,7 @@ _LAZY = {
     "SweepResult": "photoshape_flow.render.renderer",
     "build_scene": "photoshape_flow.render.scene",
     "SceneOptions": "photoshape_flow.render.scene",
+    "check_llvm": "photoshape_flow.render.selftest",
 }
 
 __all__ = [

@@ -3,16 +3,16 @@
 Why this is careful: Dr.Jit picks the newest ``libLLVM*.so`` it finds. LLVM 14 is rejected (the
 backend is disabled and the first use fails), and LLVM 15/16 *abort the interpreter* on the first
 Mitsuba kernel (``LLVM ERROR: Cannot select: fminimum``), which no ``try`` can catch. So
-`ensure_mitsuba` refuses to render when the loaded libLLVM is older than 17, and `check_llvm`
-runs a real 16x16 render in a subprocess for ``photoshape doctor``. Mitsuba also deadlocks loading
-an ``envmap`` with a single worker thread, so the thread count is never below 2.
+`ensure_mitsuba` refuses to render when the loaded libLLVM is older than 17 (and
+`render.selftest.check_llvm` runs a real render in a subprocess for ``photoshape doctor``). Mitsuba
+also deadlocks loading an ``envmap`` with a single worker thread, so the thread count is never below 2.
+
+Every other render module imports this one, so it imports none of them.
 """
 
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import threading
 from typing import Any
 
@@ -97,48 +97,3 @@ def _check_llvm_backend(dr: Any) -> None:
         raise RendererUnavailableError(
             f"Dr.Jit loaded {path} (LLVM {major}); Mitsuba kernels abort with LLVM < {MIN_LLVM_MAJOR}; {LLVM_HINT}"
         )
-
-
-def _self_test() -> None:
-    """Render a 16x16 AOV image of a quad (run by `check_llvm` in a child process)."""
-    import numpy as np
-
-    mi = ensure_mitsuba()
-    from photoshape_flow.geometry.mesh import PartMesh, ShapeMesh
-    from photoshape_flow.render.camera import Camera
-    from photoshape_flow.render.renderer import Renderer
-
-    quad = PartMesh(
-        index=1,
-        name="quad",
-        vertices=np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]], np.float32),
-        faces=np.array([[0, 1, 2], [0, 2, 3]], np.int32),
-        normals=np.tile(np.array([[0, 0, 1]], np.float32), (4, 1)),
-        uvs=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32),
-    )
-    ids = Renderer().part_ids(ShapeMesh(parts=[quad]), Camera(0.0, 0.0, 2.0, 50.0), size=16)
-    if ids[8, 8] != 1 or ids[0, 0] != 0:
-        raise SystemExit(f"wrong part-ID render: centre {ids[8, 8]}, corner {ids[0, 0]}")
-    sys.stdout.write(f"ok variant={mi.variant()} llvm={loaded_llvm() or 'n/a'}\n")
-
-
-def check_llvm(timeout: float = 180.0) -> tuple[bool, str]:
-    """Render a 16x16 AOV image in a subprocess; (ok, one-line message) for ``photoshape doctor``.
-
-    A subprocess because LLVM 15/16 abort the whole interpreter on the first Mitsuba kernel.
-    """
-    code = "from photoshape_flow.render.runtime import _self_test; _self_test()"
-    try:
-        proc = subprocess.run(
-            [sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout, check=False
-        )
-    except subprocess.TimeoutExpired:
-        return False, f"test render did not finish in {timeout:.0f} s (a single render thread deadlocks)"
-    output = (proc.stdout + proc.stderr).strip().splitlines()
-    if proc.returncode == 0 and output and output[-1].startswith("ok "):
-        return True, output[-1][3:]
-    tail = next((line for line in reversed(output) if line.strip()), "no output")
-    tail = tail.replace(f"{RendererUnavailableError.__module__}.{RendererUnavailableError.__name__}: ", "")
-    if proc.returncode < 0:
-        return False, f"test render crashed with signal {-proc.returncode} ({tail}); {LLVM_HINT}"
-    return False, f"test render failed (exit {proc.returncode}): {tail}"

@@ -47,7 +47,7 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
 def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far."""
-    from photoshape_flow.pipeline.publish import write_gallery_site
+    from photoshape_flow.pipeline.gallery_site import write_gallery_site
 
     start = time.perf_counter()
     index = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
