@@ -6,11 +6,12 @@ so runs can be compared in SQL. Stages:
 - coarse-alignment: shape recall@1/@5, median pose error, silhouette IoU for the nearest-shape case.
 - fine-alignment: part-label accuracy after coarse, flow and CRF (and silhouette IoU).
 - substances: accuracy of each observed part's substance against the substance that covers most of
-  the part's pixels in the ground truth.
+  the part's pixels in the ground truth (pairs excluded from the pipeline are not scored).
 - training: the classifier's validation metrics (the paper's Table 4 columns).
 - inference: per method (ours and every baseline) per-part material top-1/top-5 and substance
-  accuracy — the ground-truth material of a part is the one covering most of its aligned pixels, so
-  pairs with a merely similar shape are scored too — and the re-render error of the PhotoShape at the
+  accuracy — the ground-truth material of a part is the one covering most of its aligned pixels (and its
+  ground-truth substance the one covering most, as for the substances stage), so pairs with a merely
+  similar shape are scored too — and the re-render error of the PhotoShape at the
   exemplar's camera inside the exemplar's mask (RMSE and SSIM).
 """
 
@@ -96,6 +97,20 @@ def _majority(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -
     return int(np.argmax(counts[1:]) + 1)
 
 
+def _merge_labels(labels: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, list[str]]:
+    """`truth_labels`' labels with the parts that share a name (material or substance) merged into one.
+
+    Returns (labels: 0 background, i = index into the distinct names + 1, the distinct names sorted), so
+    that `_majority` picks the material (or substance) covering most of a mask, not the single part:
+    two legs of one wood outvote a larger seat of leather.
+    """
+    distinct = sorted(set(names))
+    lut = np.zeros(len(names) + 1, np.int32)
+    for i, name in enumerate(names):
+        lut[i + 1] = distinct.index(name) + 1
+    return lut[labels], distinct
+
+
 def _part_map(store: BlobStore, alignment: m.Alignment, size: int) -> np.ndarray:
     part_map = store.load_image(alignment.crf_blob)
     if part_map.ndim == 3:
@@ -113,14 +128,16 @@ def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, An
         .join(m.Part, m.Part.id == m.PartSubstance.part_id)
         .join(m.Exemplar, m.Exemplar.id == m.Pair.exemplar_id)
         .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == "flow-crf"))
-        .where(m.PartSubstance.observed, m.Alignment.status == "ok", m.Pair.exemplar_id.in_(list(truths)))
+        .where(m.PartSubstance.observed, m.Alignment.status == "ok", m.Pair.exemplar_id.in_(list(truths)),
+               ~m.Pair.exclude)
     ).all()
-    cache: dict[int, tuple[np.ndarray, list[str], list[str], np.ndarray]] = {}
+    cache: dict[int, tuple[np.ndarray, list[str], np.ndarray]] = {}
     for ps, pair, part, alignment, exemplar in rows:
         if pair.id not in cache:
             labels, _, subs = truth_labels(truths[exemplar.id], exemplar)
-            cache[pair.id] = (labels, [], subs, _part_map(store, alignment, labels.shape[0]))
-        labels, _, subs, part_map = cache[pair.id]
+            sub_labels, subs = _merge_labels(labels, subs)
+            cache[pair.id] = (sub_labels, subs, _part_map(store, alignment, labels.shape[0]))
+        labels, subs, part_map = cache[pair.id]
         winner = _majority(labels, part_map == part.index)
         if winner is None:
             continue
@@ -243,17 +260,20 @@ def evaluate_inference(
             continue
         if pair_id not in truth_cache:
             labels, mats, subs = truth_labels(truths[exemplar.id], exemplar)
-            truth_cache[pair_id] = (labels, mats, subs, _part_map(store, alignment, labels.shape[0]))
-        labels, mats, subs, part_map = truth_cache[pair_id]
+            truth_cache[pair_id] = (*_merge_labels(labels, mats), *_merge_labels(labels, subs),
+                                    _part_map(store, alignment, labels.shape[0]))
+        mat_labels, mats, sub_labels, subs, part_map = truth_cache[pair_id]
         for part_index, choices in parts.items():
-            winner = _majority(labels, part_map == part_index)
+            mask = part_map == part_index
+            winner = _majority(mat_labels, mask)
             if winner is None:
                 continue
             names = [c[0] for c in choices]
             scores[method_key]["material_top1"].append(float(names[:1] == [mats[winner - 1]]))
             scores[method_key]["material_top5"].append(float(mats[winner - 1] in names[:5]))
-            if choices[0][1] is not None:
-                scores[method_key]["substance_accuracy"].append(float(choices[0][1] == subs[winner - 1]))
+            substance = _majority(sub_labels, mask)  # labelled wherever mat_labels are: not None
+            if choices[0][1] is not None and substance is not None:
+                scores[method_key]["substance_accuracy"].append(float(choices[0][1] == subs[substance - 1]))
         # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
         if pair.exemplar_rank not in (None, 1):
             continue
