@@ -74,10 +74,10 @@ def one(args: argparse.Namespace) -> dict:
     """Child process: one (scale, mode) search; prints a JSON line."""
     import torch
 
-    from photoshape_flow.align.retrieval import _chunk_shapes, search
+    from photoshape_flow.align.retrieval import search
 
     shapes, views, dims, nq = args.one, args.views, args.dims, args.query_sample
-    step = _chunk_shapes(views, args.chunk_rows)
+    step = max(1, args.chunk_rows // max(1, views))  # whole shapes per chunk, as the search streams them
     base_rss = peak_rss_gb()
     db = SyntheticDatabase(shapes, views, dims, step)
     rng = np.random.default_rng(1)

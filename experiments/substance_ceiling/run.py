@@ -2,8 +2,8 @@
 
 The no-classifier baseline's substance is the substance network's decision; ours can only beat it
 on the substance column if the classifier's evidence (material head, its own substance head, the
-colour likelihood) says something about a part's substance that the network does not. This bench
-measures that directly from `bench/fusion_records.py`'s records, with no network run:
+colour likelihood) says something about a part's substance that the network does not. This experiment
+measures that directly from the records of `experiments.substance_ceiling.records`, with no network run:
 
   - each expert alone: the substance of the network's decision, of the material head's mass per
     substance, of the classifier's substance head, of the colour likelihood's mass; how often the
@@ -19,14 +19,17 @@ measures that directly from `bench/fusion_records.py`'s records, with no network
 Also scored: ours with the material head divided by the training renders' substance prior (their
 substances follow the network's decisions, so the head's prior echoes the network's; the frequency
 is read from the validation regions, which share the training renders' distribution), and each
-decision's recall per true substance. With `--aligned` (bench/aligned_validation.py's JSON, which
-records the same evidence) every row is scored on the aligned validation renders too.
+decision's recall per true substance. With `--aligned` (the JSON of `experiments.aligned_validation.run`,
+which records the same evidence) every row is scored on the aligned validation renders too.
 
 Parts below the classifier's smallest training region keep the network's decision (inference-8).
-Prints tables and writes bench/results/substance_ceiling.json.
+Prints tables and writes <data root>/experiments/substance_ceiling/ceiling.json.
 
-    python bench/substance_ceiling.py bench/results/fusion_records.json \
-        [--aligned bench/results/aligned_validation.json]
+    PHOTOSHAPE_DATA_ROOT=... python -m experiments.substance_ceiling.records
+    PHOTOSHAPE_DATA_ROOT=... python -m experiments.substance_ceiling.run [RECORDS] [--aligned ALIGNED_JSON]
+
+RECORDS defaults to the data root's records.json; ALIGNED_JSON is
+<data root>/experiments/aligned_validation/aligned_validation.json when that experiment has run.
 """
 
 from __future__ import annotations
@@ -41,7 +44,10 @@ from scipy.optimize import minimize
 
 from photoshape_flow.classify.color_prior import color_likelihood
 from photoshape_flow.classify.infer import substance_first_order
+from photoshape_flow.config import get_settings
 from photoshape_flow.vocab import SUBSTANCES
+
+from ..common import results_dir
 
 POOLS = {"N + H": (0, 1), "N + H + C": (0, 1, 2), "N + S": (0, 3), "N + H + C + S": (0, 1, 2, 3)}
 
@@ -101,11 +107,16 @@ def agree(regions: list[Region], member: np.ndarray) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("records", type=Path, help="bench/fusion_records.py output")
-    parser.add_argument("--aligned", type=Path, help="bench/aligned_validation.py output (with the substance head)")
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "substance_ceiling.json")
+    parser.add_argument("records", type=Path, nargs="?",
+                        help="experiments.substance_ceiling.records output (default: the data root's records.json)")
+    parser.add_argument("--aligned", type=Path,
+                        help="experiments.aligned_validation.run output (with the substance head)")
+    parser.add_argument("--out", type=Path, help="default: <data root>/experiments/substance_ceiling/ceiling.json")
     args = parser.parse_args()
-    data = json.loads(args.records.read_text())
+    folder = results_dir(get_settings(), "substance_ceiling")
+    records_path = args.records or folder / "records.json"
+    out = args.out or folder / "ceiling.json"
+    data = json.loads(records_path.read_text())
     subs = np.asarray(data["material_substances"])
     member = np.stack([subs == s for s in SUBSTANCES]).astype(np.float64)
     labs = np.asarray(data["labs"], np.float64)
@@ -182,8 +193,8 @@ def main() -> None:
         print(f"  {k}: agree on {a['agree']:.3f} of {a['parts']} (right {a['accuracy_when_agree']:.3f} of those); "
               f"where they disagree the network is right {a['disagree_network_right']:.3f}, "
               f"the head {a['disagree_head_right']:.3f}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"records": str(args.records), "aligned": str(args.aligned or ""), "rows": rows,
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"records": str(records_path), "aligned": str(args.aligned or ""), "rows": rows,
                                     "weights": weights, "agreement": agreement, "shares": shares,
                                     "recall": recall, "train_prior": train_prior.tolist()}, indent=2))
 

@@ -6,7 +6,7 @@ mask comes from the pipeline's alignment (coarse pose from HOG retrieval, flow w
 whose errors hit small parts hardest: a thin leg's aligned mask may cover its neighbour, and both the
 colour likelihood and the substance network then read the neighbour's pixels. On the seed-0 medium
 demo ours trailed the substance network's argmax on aligned parts smaller than the classifier's
-smallest training region (docs/results.md); this bench builds the same situation without touching
+smallest training region (docs/decisions.md, inference-8); this experiment builds the same situation without touching
 the exemplars. Each validation render (held-out shapes and envmaps) is re-rendered at photo size,
 imaged like a demo photo (`demo.exemplars.degrade`, JPEG), square-cropped like a stored exemplar, and
 aligned by the pipeline's code to each of the profile's `exemplar_topk` nearest shapes of the whole
@@ -23,10 +23,9 @@ Rankings, split by the aligned part's share of the image (< / >= the classifier'
   - network argmax: the substance network's decision for the part, `PartSubstance.substance`, a
                     per-pixel vote (the no-classifier baseline's pick),
   - inference-7:    head x calibrated network x colour, substance first; no head below the classifier's
-                    smallest region (the pipeline until session 9),
+                    smallest region (the pipeline's ranking before inference-8),
   - network decides small parts: inference-7, but below that size the network's substance is taken
-                    (inference-8: tried in session 8 and not adopted then; adopted on this
-                    bench's evidence in session 9),
+                    (inference-8, the pipeline's ranking, adopted on this experiment's evidence),
   - no colour for small parts: below that size the calibrated network alone (the colour likelihood
                     dropped: the argmax of the part's mean probabilities, not the network's
                     per-pixel vote that `PartSubstance.substance` records),
@@ -34,10 +33,10 @@ and inference-7 with the colour sigma and substance temperature re-fit on the al
 the even-numbered renders, scored on the odd ones; and, for the small parts, the paired counts of
 parts only one of two rankings gets right.
 
-Writes bench/results/aligned_validation.json (per-part records too, so other rankings can be scored
-without re-rendering).
+Writes <data root>/experiments/aligned_validation/aligned_validation.json (per-part records too, so
+other rankings can be scored without re-rendering: `experiments.substance_ceiling.run --aligned`).
 
-    PHOTOSHAPE_DATA_ROOT=... python bench/aligned_validation.py [--count 300] [--profile medium]
+    PHOTOSHAPE_DATA_ROOT=... python -m experiments.aligned_validation.run [--count 300] [--profile medium]
 """
 
 from __future__ import annotations
@@ -47,10 +46,12 @@ import json
 import sys
 import time
 from collections import defaultdict
-from pathlib import Path
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import sqlalchemy as sa
+from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.assignment import median_lab, substance_vector
 from photoshape_flow.classify.color_prior import color_likelihood, fit_color_sigma
@@ -62,15 +63,93 @@ from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.substances import _resize_probs
 from photoshape_flow.pipeline.training import load_material_classifier
-from photoshape_flow.pipeline.training_renders import _Inputs
+from photoshape_flow.pipeline.training_renders import material_spec
 from photoshape_flow.store import BlobStore
+from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCES
 
-sys.path.insert(0, str(Path(__file__).parent))
-from ranking_evidence import load_evidence, validation_specs
-from render_quality_gap import photo_with_parts
+from ..common import load_evidence, results_dir
+
+
+@dataclass
+class RenderInputs:
+    """Rows and render inputs of the validation renders' specs, each loaded once."""
+
+    store: BlobStore
+    shapes: dict[int, Any] = field(default_factory=dict)
+    meshes: dict[int, Any] = field(default_factory=dict)
+    materials: dict[int, Any] = field(default_factory=dict)
+    envmaps: dict[int, Any] = field(default_factory=dict)
+
+    def load(self, session: Session, spec: RenderSpec) -> None:
+        if spec.shape_id not in self.shapes:
+            self.shapes[spec.shape_id] = session.get(m.Shape, spec.shape_id)
+        missing = [p.material_id for p in spec.parts if p.material_id not in self.materials]
+        if missing:
+            for row in session.execute(sa.select(m.Material).where(m.Material.id.in_(missing))).scalars():
+                self.materials[row.id] = row
+        if spec.envmap.envmap_id not in self.envmaps:
+            self.envmaps[spec.envmap.envmap_id] = session.get(m.Envmap, spec.envmap.envmap_id)
+
+    def mesh(self, shape_id: int) -> Any:
+        if shape_id not in self.meshes:
+            from photoshape_flow.geometry.mesh import ShapeMesh
+
+            self.meshes[shape_id] = ShapeMesh.from_npz_bytes(self.store.read_bytes(self.shapes[shape_id].mesh_blob))
+        return self.meshes[shape_id]
+
+    def material_specs(self, spec: RenderSpec) -> dict[int, Any]:
+        return {p.material_id: material_spec(self.materials[p.material_id], self.store) for p in spec.parts}
+
+    def envmap_spec(self, envmap_id: int) -> Any:
+        from photoshape_flow.render import EnvmapSpec
+
+        return EnvmapSpec(path=self.store.resolve(self.envmaps[envmap_id].blob))
+
+
+def validation_specs(session: Session, count: int) -> list[tuple[m.Rendering, RenderSpec]]:
+    """About `count` validation training renders spread evenly over their keys, with their specs."""
+    rows = session.execute(
+        sa.select(m.Rendering).where(m.Rendering.kind == "training", m.Rendering.split == "val",
+                                     m.Rendering.status == "ok").order_by(m.Rendering.key)
+    ).scalars().all()
+    step = max(1, len(rows) // max(1, count))
+    out = []
+    for rendering in rows[::step][:count]:
+        params = dict(rendering.params)
+        for key in ("size", "spp"):  # rendering settings, not part of the spec
+            params.pop(key)
+        out.append((rendering, RenderSpec.from_dict(params)))
+    return out
+
+
+def photo_with_parts(renderer, mesh, spec: RenderSpec, material_specs, envmap_spec, size: int, spp: int):
+    """(sRGB uint8, part-ID map, foreground) of `spec` imaged like a demo exemplar: rendered on
+    transparent at photo size, then the demo's photo degradation (exposure, white balance, blur,
+    noise) and JPEG."""
+    import cv2
+
+    from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
+    from photoshape_flow.synth.example import build_scene_inputs
+
+    camera, materials, uv_transforms, envmap = build_scene_inputs(mesh, spec, material_specs, envmap_spec)
+    result = renderer.beauty(mesh, materials, camera, envmap, size=size, spp=spp, uv_transforms=uv_transforms,
+                             background="transparent", seed=int(spec.seed % (2**31 - 1)))
+    params = sample_degradation(np.random.default_rng(spec.seed % 2**32))
+    jpeg = encode_jpeg(degrade(result.hdr, result.alpha, params), params["jpeg_quality"])
+    rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    part_ids = np.asarray(renderer.part_ids(mesh, camera, size=size))
+    return rgb, part_ids, np.asarray(result.alpha) >= 0.5
+
+
+def resize_probs(probs: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """(S, H, W) per-pixel substance probabilities resized to `shape`, renormalised (as the substances stage)."""
+    import cv2
+
+    h, w = int(shape[0]), int(shape[1])
+    out = np.stack([cv2.resize(c, (w, h), interpolation=cv2.INTER_LINEAR) for c in probs.astype(np.float32)])
+    return out / np.maximum(out.sum(axis=0, keepdims=True), 1e-8)
 
 
 def as_exemplar(rgb: np.ndarray, part_ids: np.ndarray, fg: np.ndarray):
@@ -140,7 +219,7 @@ def main() -> None:
     min_fraction = float((row.config or {}).get("min_region_fraction", ClassifierConfig.min_region_fraction))
     index = {mid: i for i, mid in enumerate(clf.materials)}
     renderer = Renderer(resolve=store.resolve)
-    inputs = _Inputs(store=store)
+    inputs = RenderInputs(store=store)
     records: list[dict] = []
     accuracies: list[float] = []
     start = time.perf_counter()
@@ -180,7 +259,7 @@ def main() -> None:
                 if len(best_view) == topk:
                     break
             fg_small = cv2.resize(fg.astype(np.float32), (fine.size, fine.size), interpolation=cv2.INTER_AREA) >= 0.5
-            net_probs = _resize_probs(predict_substances(network, rgb, net_size), (fine.size, fine.size))
+            net_probs = resize_probs(predict_substances(network, rgb, net_size), (fine.size, fine.size))
             material_lut = np.zeros(part_ids.max(initial=0) + 1, np.int64)
             for p in spec.parts:
                 if p.index < len(material_lut):
@@ -297,8 +376,8 @@ def main() -> None:
     print("\nsmall parts, substance right only here / only with inference-7:")
     for rule, (a, b) in paired.items():
         print(f"  {rule}: {a} / {b}")
-    out = Path(__file__).parent / "results" / "aligned_validation.json"
-    out.parent.mkdir(exist_ok=True)
+    out = results_dir(settings, "aligned_validation") / "aligned_validation.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({**summary, "records": [{k: v for k, v in r.items() if k != "material_substances"}
                                                        for r in records]}))
     print(f"wrote {out}", file=sys.stderr)

@@ -1,4 +1,4 @@
-"""Per-region evidence records for scoring substance/material rankings offline.
+"""Per-region evidence records, so substance and material rankings can be scored offline.
 
 Writes, for a demo database (PHOTOSHAPE_DATA_ROOT), one record per scored region with every piece
 of evidence inference has: the material head's probabilities, the classifier's own substance head,
@@ -11,9 +11,9 @@ the region's share of the image, and the truth (material index in the classifier
     `photoshape eval` scores them (majority ground-truth label under the aligned mask).
 
 Any ranking can then be scored from the JSON without re-running a network:
-bench/substance_ceiling.py does that. Nothing here is fit or chosen.
+`experiments.substance_ceiling.run` does that. Nothing here is fit or chosen.
 
-    PHOTOSHAPE_DATA_ROOT=... python bench/fusion_records.py [groundtruth.json] [--out FILE]
+    PHOTOSHAPE_DATA_ROOT=... python -m experiments.substance_ceiling.records [groundtruth.json] [--out FILE]
 """
 
 from __future__ import annotations
@@ -21,26 +21,116 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import sqlalchemy as sa
+from sqlalchemy.orm import Session
 
+from photoshape_flow.align.partmap import resize_labels
 from photoshape_flow.classify.assignment import median_lab
+from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
-from photoshape_flow.pipeline.evaluate import _majority
+from photoshape_flow.pipeline.evaluate import truth_labels
 from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 
-sys.path.insert(0, str(Path(__file__).parent))
-from ranking_evidence import exemplar_pairs, load_evidence, validation_regions
+from ..common import load_evidence, results_dir
+
+# -- ground truth as `photoshape eval` reads it (the same rules as pipeline/evaluate.py) ----------------
+
+
+def exemplar_truths(session: Session, gt: Any) -> dict[int, Any]:
+    """exemplar id -> its ground-truth record (matched by file stem = source_id)."""
+    out = {}
+    for exemplar in session.execute(sa.select(m.Exemplar).where(m.Exemplar.status == "ok")).scalars():
+        stem = Path(exemplar.source_id).stem
+        if stem in gt.exemplars:
+            out[exemplar.id] = gt.exemplars[stem]
+    return out
+
+
+def majority(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -> int | None:
+    """The non-zero label covering most of `mask` (None when the mask is mostly ground-truth background)."""
+    values = labels[mask]
+    if values.size == 0:
+        return None
+    counts = np.bincount(values, minlength=1)
+    if counts[1:].sum() < min_fraction * values.size:
+        return None
+    return int(np.argmax(counts[1:]) + 1)
+
+
+def aligned_part_map(store: BlobStore, alignment: m.Alignment, size: int) -> np.ndarray:
+    """The alignment's CRF part map at `size` x `size` (the stored exemplar's frame)."""
+    part_map = store.load_image(alignment.crf_blob)
+    if part_map.ndim == 3:
+        part_map = part_map[..., 0]
+    return resize_labels(part_map, size).astype(np.int32)
+
+
+@dataclass
+class ExemplarPair:
+    """One aligned pair with demo ground truth, loaded as `photoshape eval` scores it."""
+
+    pair: m.Pair
+    exemplar: m.Exemplar
+    labels: np.ndarray  # ground-truth label per pixel of the stored exemplar (0: background)
+    materials: list[str]  # material name of label i + 1
+    substances: list[str]  # substance of label i + 1
+    part_map: np.ndarray  # the aligned (CRF) part map at the exemplar's size
+    image: np.ndarray  # the exemplar's RGB
+    part_substances: dict[int, m.PartSubstance]  # part id -> its row for this pair
+    parts: list[m.Part]
+
+
+def exemplar_pairs(session: Session, store: BlobStore, gt: Any) -> Iterator[ExemplarPair]:
+    """Every aligned (flow-crf), non-excluded pair whose exemplar has ground truth, in pair order."""
+    truths = exemplar_truths(session, gt)
+    rows = session.execute(
+        sa.select(m.Pair, m.Alignment).join(m.Alignment, m.Alignment.pair_id == m.Pair.id)
+        .where(m.Alignment.status == "ok", m.Alignment.method == "flow-crf",
+               m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
+        .order_by(m.Pair.id)
+    ).all()
+    for pair, alignment in rows:
+        exemplar = session.get(m.Exemplar, pair.exemplar_id)
+        labels, materials, substances = truth_labels(truths[exemplar.id], exemplar)
+        yield ExemplarPair(
+            pair=pair, exemplar=exemplar, labels=labels, materials=materials, substances=substances,
+            part_map=aligned_part_map(store, alignment, labels.shape[0]),
+            image=store.load_image(exemplar.image_blob)[..., :3],
+            part_substances={ps.part_id: ps for ps in session.execute(
+                sa.select(m.PartSubstance).where(m.PartSubstance.pair_id == pair.id)).scalars()},
+            parts=list(session.execute(sa.select(m.Part).where(m.Part.shape_id == pair.shape_id)).scalars()),
+        )
+
+
+def validation_regions(
+    items: Any, materials: Any, min_fraction: float = 0.005
+) -> Iterator[tuple[int, np.ndarray, np.ndarray, list[tuple[int, np.ndarray]]]]:
+    """(render number, material-id map, RGB, [(material id, mask)]) of each validation render with regions.
+
+    Regions are the exact material regions of at least `min_fraction` of the image (the classifier's
+    training threshold) whose material is in `materials`.
+    """
+    for number, item in enumerate(items):
+        ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
+        minimum = int(np.ceil(min_fraction * ids.size))
+        regions = [(int(v), ids == v) for v, c in zip(*np.unique(ids, return_counts=True), strict=True)
+                   if v != 0 and c >= minimum and int(v) in materials]
+        if regions:
+            yield number, ids, rgb, regions
 
 
 def _lab(rgb: np.ndarray, mask: np.ndarray) -> list[float] | None:
@@ -51,9 +141,10 @@ def _lab(rgb: np.ndarray, mask: np.ndarray) -> list[float] | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("groundtruth", nargs="?", type=Path)
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "fusion_records.json")
+    parser.add_argument("--out", type=Path, help="default: <data root>/experiments/substance_ceiling/records.json")
     args = parser.parse_args()
     settings = get_settings()
+    out = args.out or results_dir(settings, "substance_ceiling") / "records.json"
     gt_path = args.groundtruth or newest_groundtruth(settings.data_root)
     if gt_path is None:
         sys.exit(f"{settings.data_root}: no demo ground truth; run `photoshape demo` or pass groundtruth.json")
@@ -85,7 +176,7 @@ def main() -> None:
             items = []
             for part in ep.parts:
                 mask = ep.part_map == part.index
-                winner = _majority(ep.labels, mask)
+                winner = majority(ep.labels, mask)
                 ps = ep.part_substances.get(part.id)
                 if winner is None or mask.sum() < min_pixels or ps is None or not ps.observed or not ps.substance:
                     continue
@@ -104,14 +195,14 @@ def main() -> None:
                     "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
                     "lab": _lab(ep.image, mask),
                 })
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({
         "groundtruth": str(gt_path), "classifier": row.id, "materials": clf.materials,
         "material_substances": clf.material_substances, "labs": ev.labs.round(4).tolist(),
         "color_sigma": ev.sigma, "temperature": ev.temperature, "substance_network": ev.network_id,
         "min_region_fraction": min_fraction, "validation": validation, "exemplars": exemplars,
     }))
-    print(f"{len(validation)} validation regions, {len(exemplars)} exemplar parts -> {args.out}")
+    print(f"{len(validation)} validation regions, {len(exemplars)} exemplar parts -> {out}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,1 @@
+"""Does the classifier add substance information beyond the substance network on exemplars?"""
