@@ -39,7 +39,7 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
-from photoshape_flow.pipeline.evaluate import truth_labels
+from photoshape_flow.pipeline.evaluate import majority_label, merge_labels, truth_labels
 from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
@@ -58,17 +58,6 @@ def exemplar_truths(session: Session, gt: Any) -> dict[int, Any]:
         if stem in gt.exemplars:
             out[exemplar.id] = gt.exemplars[stem]
     return out
-
-
-def majority(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -> int | None:
-    """The non-zero label covering most of `mask` (None when the mask is mostly ground-truth background)."""
-    values = labels[mask]
-    if values.size == 0:
-        return None
-    counts = np.bincount(values, minlength=1)
-    if counts[1:].sum() < min_fraction * values.size:
-        return None
-    return int(np.argmax(counts[1:]) + 1)
 
 
 def aligned_part_map(store: BlobStore, alignment: m.Alignment, size: int) -> np.ndarray:
@@ -173,17 +162,20 @@ def main() -> None:
         by_name = {name: mid for mid, name in names.items()}
         for ep in exemplar_pairs(session, store, gt):
             min_pixels = max(16, int(0.0005 * ep.part_map.size))
+            mat_labels, mat_names = merge_labels(ep.labels, ep.materials)  # scored as `photoshape eval` does
+            sub_labels, sub_names = merge_labels(ep.labels, ep.substances)
             items = []
             for part in ep.parts:
                 mask = ep.part_map == part.index
-                winner = majority(ep.labels, mask)
+                winner = majority_label(mat_labels, mask)
                 ps = ep.part_substances.get(part.id)
                 if winner is None or mask.sum() < min_pixels or ps is None or not ps.observed or not ps.substance:
                     continue
-                truth = by_name.get(ep.materials[winner - 1])
+                truth = by_name.get(mat_names[winner - 1])
                 if truth not in index:
                     continue
-                items.append((part, mask, ps, index[truth], ep.substances[winner - 1]))
+                sub_winner = majority_label(sub_labels, mask)
+                items.append((part, mask, ps, index[truth], sub_names[sub_winner - 1] if sub_winner else None))
             if not items:
                 continue
             mat, sub = clf.predict(ep.image, [i[1] for i in items])

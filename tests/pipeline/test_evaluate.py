@@ -257,13 +257,13 @@ def test_majority(values: list[int], expected: int | None) -> None:
     """The rule that decides which ground-truth label a part is scored against."""
     labels = np.array(values + [5], np.int64)  # one pixel outside the mask, never counted
     mask = np.array([True] * len(values) + [False])
-    assert ev._majority(labels, mask) == expected
+    assert ev.majority_label(labels, mask) == expected
 
 
 def test_merge_labels_joins_parts_of_one_material() -> None:
     """Two legs of one walnut become one label, so together they can outvote a larger seat."""
     labels = np.array([[0, 1, 2, 3, 4]])
-    merged, names = ev._merge_labels(labels, ["blue_leather", "walnut", "walnut", "red_leather"])
+    merged, names = ev.merge_labels(labels, ["blue_leather", "walnut", "walnut", "red_leather"])
     assert names == ["blue_leather", "red_leather", "walnut"]
     np.testing.assert_array_equal(merged, [[0, 1, 3, 3, 2]])
 

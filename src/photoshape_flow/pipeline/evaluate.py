@@ -86,7 +86,7 @@ def truth_labels(truth: Any, exemplar: m.Exemplar) -> tuple[np.ndarray, list[str
     return labels, [truth.parts[n].material for n in names], [truth.parts[n].substance for n in names]
 
 
-def _majority(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -> int | None:
+def majority_label(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -> int | None:
     """The non-zero label covering most of `mask` (None when the mask is mostly ground-truth background)."""
     values = labels[mask]
     if values.size == 0:
@@ -97,11 +97,11 @@ def _majority(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -
     return int(np.argmax(counts[1:]) + 1)
 
 
-def _merge_labels(labels: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, list[str]]:
+def merge_labels(labels: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, list[str]]:
     """`truth_labels`' labels with the parts that share a name (material or substance) merged into one.
 
     Returns (labels: 0 background, i = index into the distinct names + 1, the distinct names sorted), so
-    that `_majority` picks the material (or substance) covering most of a mask, not the single part:
+    that `majority_label` picks the material (or substance) covering most of a mask, not the single part:
     two legs of one wood outvote a larger seat of leather.
     """
     distinct = sorted(set(names))
@@ -135,10 +135,10 @@ def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, An
     for ps, pair, part, alignment, exemplar in rows:
         if pair.id not in cache:
             labels, _, subs = truth_labels(truths[exemplar.id], exemplar)
-            sub_labels, subs = _merge_labels(labels, subs)
+            sub_labels, subs = merge_labels(labels, subs)
             cache[pair.id] = (sub_labels, subs, _part_map(store, alignment, labels.shape[0]))
         labels, subs, part_map = cache[pair.id]
-        winner = _majority(labels, part_map == part.index)
+        winner = majority_label(labels, part_map == part.index)
         if winner is None:
             continue
         total += 1
@@ -260,18 +260,18 @@ def evaluate_inference(
             continue
         if pair_id not in truth_cache:
             labels, mats, subs = truth_labels(truths[exemplar.id], exemplar)
-            truth_cache[pair_id] = (*_merge_labels(labels, mats), *_merge_labels(labels, subs),
+            truth_cache[pair_id] = (*merge_labels(labels, mats), *merge_labels(labels, subs),
                                     _part_map(store, alignment, labels.shape[0]))
         mat_labels, mats, sub_labels, subs, part_map = truth_cache[pair_id]
         for part_index, choices in parts.items():
             mask = part_map == part_index
-            winner = _majority(mat_labels, mask)
+            winner = majority_label(mat_labels, mask)
             if winner is None:
                 continue
             names = [c[0] for c in choices]
             scores[method_key]["material_top1"].append(float(names[:1] == [mats[winner - 1]]))
             scores[method_key]["material_top5"].append(float(mats[winner - 1] in names[:5]))
-            substance = _majority(sub_labels, mask)  # labelled wherever mat_labels are: not None
+            substance = majority_label(sub_labels, mask)  # labelled wherever mat_labels are: not None
             if choices[0][1] is not None and substance is not None:
                 scores[method_key]["substance_accuracy"].append(float(choices[0][1] == subs[substance - 1]))
         # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
