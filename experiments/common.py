@@ -20,7 +20,7 @@ from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_m
 from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
-from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS, material_lab
+from photoshape_flow.pipeline.calibration import COLOR_SIGMA_RENDERS, material_lab
 from photoshape_flow.pipeline.substances import substance_temperature
 from photoshape_flow.pipeline.training import training_data
 from photoshape_flow.store import BlobStore

@@ -56,7 +56,8 @@ from sqlalchemy.orm import Session
 from photoshape_flow.classify.assignment import median_lab, substance_vector
 from photoshape_flow.classify.color_prior import color_likelihood, fit_color_sigma
 from photoshape_flow.classify.configs import ClassifierConfig
-from photoshape_flow.classify.infer import substance_first_order
+from photoshape_flow.classify.ranking import PartEvidence, substance_first_order
+from photoshape_flow.classify.ranking import scores as ranking_scores
 from photoshape_flow.classify.substance_calibration import fit_temperature, temper
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_train import predict_substances
@@ -309,11 +310,14 @@ def main() -> None:
     for r in records:
         r["material_substances"] = subs
 
+    policy = clf.policy()
+
     def scores(r: dict, use_head: bool, use_colour: bool, t: float | None, s: float) -> np.ndarray:
-        probs = np.asarray(r["head"])[None] if use_head else np.ones((1, len(subs) + 1))
-        weights = substance_vector(temper(dict(zip(SUBSTANCES, r["network_probs"], strict=True)), t))[None]
-        colour = color_likelihood(r["lab"], labs, s)[None] if use_colour else None
-        return clf.scores(probs, weights, colour)[0]
+        return ranking_scores(policy, PartEvidence(
+            material_probs=np.asarray(r["head"]) if use_head else None,
+            substance_weights=substance_vector(temper(dict(zip(SUBSTANCES, r["network_probs"], strict=True)), t)),
+            color_weights=color_likelihood(r["lab"], labs, s) if use_colour else None,
+        ))
 
     def ranking(small_rule: str, t: float | None = temperature, s: float = sigma):
         def rank(r: dict) -> int | None:

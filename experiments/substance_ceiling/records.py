@@ -39,8 +39,8 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import load_groundtruth, newest_groundtruth
+from photoshape_flow.pipeline.calibration import COLOR_SIGMA_RENDERS
 from photoshape_flow.pipeline.evaluate import majority_label, merge_labels, truth_labels
-from photoshape_flow.pipeline.inference import COLOR_SIGMA_RENDERS
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from photoshape_flow.classify.color_prior import color_likelihood
-from photoshape_flow.classify.infer import substance_first_order
+from photoshape_flow.classify.ranking import substance_first_order
 from photoshape_flow.config import get_settings
 from photoshape_flow.vocab import SUBSTANCES
 

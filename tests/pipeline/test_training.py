@@ -156,26 +156,31 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
     assert ranked[0]["score"] >= ranked[1]["score"]
     assert payload["color_sigma"] is None  # the materials have no colour yet: no colour likelihood
 
-    # with the materials' colours known, the colour likelihood (sigma fit on the val renders) joins in
-    # and, the region being drawn in its material's colour, puts that material first
+    # with the materials' colours known, the training stage's calibration fits sigma on the val renders;
+    # retrieve reads it, and the colour likelihood puts the material drawn in the region's colour first
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.pipeline.calibration import calibrate
+
     with session_scope(db_url) as session:
         for mid, (_, colour) in materials.items():
             session.execute(sa.update(Material).where(Material.id == mid)
                             .values(params={"albedo": [c / 255 for c in colour]}))
     args = ["retrieve", str(tmp_path / "photo.png"), "--mask", str(tmp_path / "mask.png"), "--json"]
+    assert json.loads(runner.invoke(app, args).output)["color_sigma"] is None  # not calibrated yet: not fitted
+    fitted = calibrate(get_settings(), classifier_id)["color_sigma"]
     coloured = json.loads(runner.invoke(app, args).output)
-    assert 1.0 <= coloured["color_sigma"] < 20
+    assert 1.0 <= coloured["color_sigma"] < 20 and coloured["color_sigma"] == pytest.approx(fitted)
     assert coloured["regions"][0]["materials"][0]["material_id"] == int(id_map.max())
     # the fitted sigma is cached on the classifier row, keyed by the renders and material colours
     with session_scope(db_url) as session:
         cached = dict(session.get(Classifier, classifier_id).metrics)
     assert cached["color_sigma"] == pytest.approx(coloured["color_sigma"])
-    assert json.loads(runner.invoke(app, args).output)["color_sigma"] == coloured["color_sigma"]
+    assert calibrate(get_settings(), classifier_id)["color_sigma"] == fitted  # cached: not refit
     with session_scope(db_url) as session:
         assert session.get(Classifier, classifier_id).metrics["color_sigma_key"] == cached["color_sigma_key"]
         first = min(materials)
         session.execute(sa.update(Material).where(Material.id == first).values(params={"albedo": [0.9, 0.9, 0.1]}))
-    runner.invoke(app, args)
+    calibrate(get_settings(), classifier_id)
     with session_scope(db_url) as session:  # a material's colour changed: refit under a new key
         assert session.get(Classifier, classifier_id).metrics["color_sigma_key"] != cached["color_sigma_key"]
     plain = json.loads(runner.invoke(app, [*args, "--no-color-prior"]).output)

@@ -28,9 +28,9 @@ from photoshape_flow.imaging.squares import crop_square, square_box
 
 DESCRIPTOR_CODE_VERSION = 1  # bump when the computation changes in a way the params do not show
 
-# Chosen by bench/hog_channels.py on the medium demo (72 shapes, 200 exemplars; results in
-# bench/results/hog_channels.json): the 9 contrast-insensitive orientations reach shape recall@1
-# 0.83 (energy8, the original's choice: 0.69; all31: 0.86 at 3.4x the dimensions) for 1,521 dims.
+# Chosen by bench/hog_channels.py on the medium demo (72 shapes, 200 exemplars; table in
+# docs/benchmarks.md): the 9 contrast-insensitive orientations reach shape recall@1 0.85 (energy8,
+# the original's choice: 0.67; all31: 0.87 at 3.4x the dimensions) for 1,521 dims.
 DEFAULT_CHANNELS = "insensitive9"
 
 # Default pair cut-off per channel set (squared L2): 1.5 x the largest top-1 distance of a correct

@@ -17,7 +17,7 @@ The flow is computed on the *exemplar* grid and points into the rendered map (ba
 at `scale` of the working resolution after padding and a slight blur as in the original, then
 upsampled bicubically; labels are sampled with nearest-neighbour lookups, so no label is invented.
 
-Measured choice (bench/fine_alignment.py, 320^2; results in bench/results/fine_alignment.json):
+Measured choice (bench/fine_alignment.py at 320^2; table in docs/benchmarks.md):
 mean part-label accuracy after flow + CRF over the synthetic 3-D pairs and the demo "small" ground
 truth is 0.943 dis-sdf, 0.945 deepflow-sdf, 0.941 hs-sdf, 0.931 hs-coords; the first three tie
 (within 0.005) and dis-sdf is 3-7x faster (deepflow-sdf also distorts the silhouettes of non-exact

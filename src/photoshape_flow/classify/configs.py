@@ -3,34 +3,29 @@
 * ``tiny``: CI and unit tests. ResNet-18 at width 8 (same keys, 1/64 of the compute), 32 px, a few
   steps. Learns colour-coded toy data; not a real classifier.
 * ``cpu``: the demo. ResNet-18 (full width) at 96 px, Adam 1e-3, 6 epochs of at most 30 batches of 32
-  (at most 5,760 region views: ~1.5 min on 2 idle cores, from the ~60-80 img/s that ResNet-18 at
-  96 px trains at there; bench/classifier.py measures it). Raise ``epochs`` / ``max_steps_per_epoch``
+  (at most 5,760 region views: ~1.5 min on 2 idle cores; bench/classifier.py measures it). Raise
+  ``epochs`` / ``max_steps_per_epoch``
   for the medium demo. Torch threads above the free cores are ruinous (OpenMP spinning: 20x slower
   under load), so set ``PHOTOSHAPE_TORCH_THREADS`` when training shares the box. From scratch: no ImageNet
   weights ship with the project, and SGD at the paper's 1e-4 barely moves a randomly initialised
   network in that budget, hence Adam with a larger step, decayed along a cosine (per step) so the
-  last epochs settle instead of oscillating (with a constant 1e-3 the medium demo's validation
-  mtl@1 swung between 0.20 and 0.42 from one epoch to the next), and the epoch with the best
-  validation mtl@1 is the one kept. Hue jitter is +-0.02 of a turn (the default 0.05 is +-18
-  degrees, larger than the colour differences between the demo's materials of one substance and
-  than the demo exemplars' white-balance jitter; not measured separately from the other two
-  changes). ``finetune_epochs`` is used when the material set grew and training starts from the
-  previous classifier.
+  last epochs settle instead of oscillating, and the epoch with the best validation mtl@1 is the
+  one kept; hue jitter is +-0.02 of a turn, below the colour differences between the demo's
+  materials of one substance (docs/decisions.md, D2). ``finetune_epochs`` is used when the material
+  set grew and training starts from the previous classifier.
 
-Two options stay off in every configuration because they measured worse on the medium demo
-(2026-11-22, docs/results.md): ``frame_object`` (cut each training render to the square around its
-object, as exemplars are cut; an object spans ~70% of a training render, all of an exemplar;
-likely harmful because it upsamples the 128-px renders and softens their textures) with ``augment.blur`` (a
-random Gaussian blur against the renders' sampling noise): exemplar top-1 / top-5 0.334 / 0.663
-with both against 0.359 / 0.685 without.
+``frame_object`` (cut each training render to the square around its object, as exemplars are cut)
+and ``augment.blur`` (a random blur against the renders' sampling noise) stay off in every
+configuration: together they measured worse on the exemplars (docs/decisions.md, D4).
 * ``paper``: section 5.2 as published. ResNet-34 at 224 px, SGD with a fixed learning rate of 1e-4,
   momentum 0.9, weight decay 1e-4 (never on the log-variances), uncertainty-weighted loss with
   s_m = 0, s_s = -1, about 100 epochs, the last epoch kept; ImageNet weights when `pretrained` names a torchvision
   ``resnet34`` .pth file (the paper starts from ImageNet, then OpenSurfaces substance pretraining,
   which is not reproduced). Meant for CUDA (`settings.device` = auto picks it when present); on the
-  2-core CPU one epoch over 10k regions is ~17 min (9.9 img/s, bench/classifier.py, 2026-11-22).
+  2-core CPU one epoch over 10k regions is ~17 min (bench/classifier.py; docs/benchmarks.md).
 
-`get_config(name, **overrides)` returns a frozen dataclass; `config_hash` is the part of the
+Profiles (`photoshape_flow.profiles`) nest these as `Profile.training`. `get_config(name, **overrides)`
+returns a frozen dataclass; `config_hash` is the part of the
 classifier's params_hash that depends on the configuration.
 """
 

@@ -2,11 +2,9 @@
 
 `load_classifier(checkpoint)` rebuilds the network of a checkpoint (bytes, path or dict) in eval mode
 on the configured device. `MaterialClassifier.predict(image, masks)` classifies each masked region
-of one image in batches and returns softmax probabilities of both heads; `top_k` ranks materials,
-by default weighting each material's probability by the predicted probability of its substance
-("we are able to improve material prediction performance by weighting the material prediction by
-the confidence of the corresponding substance category prediction"). The background class is never
-ranked.
+of one image in batches and returns softmax probabilities of both heads; `classify.ranking` turns
+them (with the other evidence) into ranked materials under `MaterialClassifier.policy()`. The
+background class is never ranked.
 
 Non-square images are padded to a square with white (the training renders are square, object on
 white) or, with ``crop="mask"``, cut to a square around the region's bounding box with some context,
@@ -15,8 +13,7 @@ which suits photos where the object is small.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -25,46 +22,12 @@ import torch
 
 from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.dataset import make_input
+from photoshape_flow.classify.ranking import RankingPolicy
 from photoshape_flow.classify.resnet import MaterialResNet
-from photoshape_flow.classify.train import material_substance_index, resolve_device
+from photoshape_flow.classify.train import resolve_device
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 CropMode = Literal["image", "mask"]
-
-
-@dataclass(frozen=True)
-class Ranked:
-    """One ranked material for a region."""
-
-    material_id: int
-    substance: str
-    score: float  # ranking score (substance-weighted probability unless weighting is off)
-    probability: float  # the material head's softmax probability
-
-
-def substance_first_order(scores: np.ndarray, substances: Sequence[str], substance: str | None = None) -> np.ndarray:
-    """Material indices for one region, best first, deciding the substance before the material.
-
-    The first material is the best-scoring one of the substance with the most ranking mass (the sum
-    of its materials' scores); the others follow by score. Why: the scores are an (unnormalised)
-    posterior over materials, and the substance that posterior believes most is the sum over the
-    substance's materials, not the substance of the single best material, which a cluster of
-    similar materials of another substance can outvote by splitting the mass. Choosing the
-    substance first is the Bayes decision for the substance and costs the material ranking nothing
-    measurable (docs/results.md, bench/substance_weighting.py). A given `substance` (one decided by
-    other evidence) is taken instead, when any of its materials has a positive score.
-    """
-    scores = np.asarray(scores, dtype=np.float64)
-    labels = np.asarray(substances)
-    order = np.argsort(-scores, kind="stable")
-    if order.size == 0:
-        return order
-    mass = {name: float(scores[labels == name].sum()) for name in dict.fromkeys(labels.tolist())}
-    best = max(mass, key=lambda name: mass[name])  # ties: the first substance in material order
-    if substance is not None and mass.get(substance, 0.0) > 0.0:
-        best = substance
-    first = next(int(i) for i in order if labels[i] == best)
-    return np.concatenate([[first], order[order != first]]).astype(np.int64)
 
 
 def _square(image: np.ndarray, mask: np.ndarray, crop: CropMode, context: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +73,6 @@ class MaterialClassifier:
         self.image_size = int(image_size)
         self.batch_size = int(batch_size)
         self.flip = bool(flip)
-        self._substance_index = material_substance_index(self.material_substances)
 
     @property
     def num_materials(self) -> int:
@@ -159,60 +121,11 @@ class MaterialClassifier:
             return np.zeros((0, self.num_materials + 1), np.float32), np.zeros((0, len(SUBSTANCE_LABELS)), np.float32)
         return torch.cat(mats).numpy(), torch.cat(subs).numpy()
 
-    def scores(
-        self, material_probs: np.ndarray, substance_probs: np.ndarray | None = None,
-        color_weights: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """Ranking scores (K, |M|) of the materials (background dropped).
-
-        Multiplied by the substance confidence when `substance_probs` (K, 6) is given, and by the
-        colour likelihood (`classify.color_prior`) when `color_weights` (K, |M|) is given.
-        """
-        probs = np.asarray(material_probs)[:, 1:]
-        if substance_probs is not None:
-            probs = probs * np.asarray(substance_probs)[:, self._substance_index[1:].numpy()]
-        if color_weights is not None:
-            probs = probs * np.asarray(color_weights)
-        return probs
-
-    def top_k(
-        self,
-        material_probs: np.ndarray,
-        substance_probs: np.ndarray | None = None,
-        k: int = 10,
-        weight_by_substance: bool = True,
-        color_weights: np.ndarray | None = None,
-        substance_first: bool = False,
-        substances: Sequence[str | None] | None = None,
-    ) -> list[list[Ranked]]:
-        """The k best materials per region, best first.
-
-        With `substance_first` the first material is chosen within the substance of most ranking
-        mass (`substance_first_order`; what inference and retrieval do), or within the region's
-        entry of `substances` where that is given and not None, else by score alone.
-        """
-        scores = self.scores(material_probs, substance_probs if weight_by_substance else None, color_weights)
-        probs = np.asarray(material_probs)[:, 1:]
-        results = []
-        for row in range(scores.shape[0]):
-            if substance_first:
-                decided = substances[row] if substances is not None else None
-                order = substance_first_order(scores[row], self.material_substances, decided)[: max(0, k)]
-            else:
-                order = np.argsort(-scores[row], kind="stable")[: max(0, k)]
-            results.append([
-                Ranked(self.materials[i], self.material_substances[i], float(scores[row, i]), float(probs[row, i]))
-                for i in order
-            ])
-        return results
-
-    def rank(
-        self, image_rgb: np.ndarray, masks: Sequence[np.ndarray], k: int = 10, weight_by_substance: bool = True,
-        crop: CropMode = "image",
-    ) -> list[list[Ranked]]:
-        """`predict` then `top_k`: the retrieval of section 6.5."""
-        mat, sub = self.predict(image_rgb, masks, crop)
-        return self.top_k(mat, sub, k=k, weight_by_substance=weight_by_substance)
+    def policy(self, min_region_fraction: float = 0.0, substance_first: bool = True,
+               enabled: Collection[int] | None = None) -> RankingPolicy:
+        """The ranking policy over this classifier's materials (`classify.ranking.rank_part` applies it)."""
+        return RankingPolicy(tuple(self.materials), tuple(self.material_substances), substance_first,
+                             min_region_fraction, enabled)
 
 
 def load_classifier(

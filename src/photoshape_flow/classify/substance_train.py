@@ -4,8 +4,8 @@ Data: bootstrap renders (sRGB on white) with their per-pixel `substance_ids` lab
 first cut to the square around its object (``frame_object``), as exemplars are cropped. Augmentation
 per sample: an optional random Gaussian blur (sigma ~ U(0, ``blur``), against the renders' sampling
 noise), random square crop covering `crop_scale` of the area, resized to `size`; horizontal flip;
-colour jitter (brightness, contrast, saturation). Framing and blur are off in every preset: on the
-medium demo they gave 0.558 part substance accuracy against 0.566 without (2026-11-22).
+colour jitter (brightness, contrast, saturation). Framing and blur are off in every preset: they
+measured worse on the medium demo (docs/decisions.md, D4).
 Loss: per-pixel cross-entropy with class weights ~ frequency^-1/2 (the white background dominates
 the pixels). AdamW with a cosine learning-rate
 schedule computed from the global iteration, so a resumed run follows the same schedule.

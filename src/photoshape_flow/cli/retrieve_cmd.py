@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, require_database
+from photoshape_flow.cli.common import console, err_console, fail, require_database
 
 
 def retrieve(
@@ -41,10 +41,12 @@ def retrieve(
 
     from photoshape_flow.classify.assignment import median_lab
     from photoshape_flow.classify.color_prior import color_likelihood
+    from photoshape_flow.classify.configs import ClassifierConfig
+    from photoshape_flow.classify.ranking import PartEvidence, rank_part
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.models import Classifier, Material
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.inference import color_prior_for
+    from photoshape_flow.pipeline.calibration import stored_color_prior
     from photoshape_flow.pipeline.training import load_material_classifier
     from photoshape_flow.store import BlobStore
 
@@ -71,15 +73,24 @@ def retrieve(
     except (LookupError, ValueError) as exc:
         fail(str(exc))
     material_probs, substance_probs = model.predict(photo, masks, crop=crop)  # type: ignore[arg-type]
-    colours = None
     with session_scope(settings.resolved_database_url) as session:
-        prior = color_prior_for(session, BlobStore(settings.blob_root), model.materials,
-                                session.get(Classifier, row.id)) if color_prior else None
-    if prior is not None:
-        labs, sigma = prior
-        colours = np.stack([color_likelihood(median_lab(photo, region), labs, sigma) for region in masks])
-    ranked = model.top_k(material_probs, substance_probs, k=top, weight_by_substance=substance_weighting,
-                         color_weights=colours, substance_first=True)
+        prior = stored_color_prior(session, BlobStore(settings.blob_root), model.materials,
+                                   session.get(Classifier, row.id)) if color_prior else None
+    policy = model.policy((row.config or {}).get("min_region_fraction", ClassifierConfig.min_region_fraction))
+    ranked = []
+    for i, (path, region) in enumerate(zip(mask, masks, strict=True)):
+        evidence = PartEvidence(
+            material_probs=material_probs[i], substance_weights=substance_probs[i] if substance_weighting else None,
+            color_weights=color_likelihood(median_lab(photo, region), *prior) if prior is not None else None,
+            # with crop="mask" the head sees the region enlarged: its size in the photo does not matter
+            region_fraction=float(region.mean()) if crop == "image" else None,
+        )
+        part = rank_part(evidence, policy, top)
+        if not part.head_used:
+            err_console.print(f"[yellow]warning:[/] {path}: the region covers {region.mean():.2%} of the photo, "
+                              f"less than the {policy.min_region_fraction:.1%} the classifier was trained on: "
+                              "ranked without its material head (or use --crop mask)", highlight=False)
+        ranked.append(part.materials)
     ids = sorted({r.material_id for regions in ranked for r in regions})
     with session_scope(settings.resolved_database_url) as session:
         rows = session.execute(sa.select(Material.id, Material.name).where(Material.id.in_(ids)))

@@ -2,20 +2,17 @@
 
 For each pair with a fine alignment, each part visible in the aligned (CRF) part map is classified on
 the exemplar with its mask; parts with too few pixels for the classifier are *unobserved*: their
-substance is the substance network's when it saw the part (inference-5), else a prior (the substances
-the same part showed in the shape's other pairs, else a part-name prior), their material comes from
-the method restricted to that substance, and their rows are marked `unobserved`.
+substance is the substance network's when it saw the part, else a prior (the substances the same
+part showed in the shape's other pairs, else a part-name prior), their material comes from the
+method restricted to that substance, and their rows are marked `unobserved`.
 
-Methods (`assignment.method`): `classifier` (ours: material probability x calibrated substance
-confidence x colour likelihood, both fit on validation renders, the first material taken from the
-substance with the most of that score (inference-6); a part smaller than the classifier's smallest
-training region is ranked without the material head, whose output there is not evidence
-(inference-7, params `classifier_head: false`), and takes the substance network's decision as its
-substance (inference-8, chosen on aligned validation renders: bench/aligned_validation.py); rows
-keyed `classifier:<id>` so a new
-classifier adds rows and older ones stay queryable), and the baselines of section 6.1 computed by the same code
-path: `builtin`, `no-classifier`, `color-match`. Several workers may run this stage at once: pairs are
-claimed with a lease (`work_claim`), and each pair's rows are replaced in one transaction.
+Methods (`assignment.method`): `classifier` (ours: the evidence of each part ranked by the one
+policy of `classify.ranking`, with the calibrations the training stage stored; rows keyed
+`classifier:<id>`, so a new classifier adds rows and older ones stay queryable) and the baselines of
+section 6.1 computed by the same code path: `builtin`, `no-classifier`, `color-match`. The rules of
+the policy and the evidence behind each are records in docs/decisions.md. Several workers may run
+this stage at once: pairs are claimed with a lease (`work_claim`), and each pair's rows are replaced
+in one transaction.
 """
 
 from __future__ import annotations
@@ -24,7 +21,7 @@ import hashlib
 import json
 import logging
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -35,24 +32,25 @@ from sqlalchemy.orm import Session
 from photoshape_flow.classify.assignment import (
     RankedMaterial,
     color_match,
-    foreground_of_render,
     item_seed,
     median_lab,
     one_substance,
     random_of_substance,
     substance_vector,
 )
-from photoshape_flow.classify.color_prior import (
-    color_likelihood,
-    fit_color_sigma,
-    material_lab_matrix,
-    region_color_distances,
-)
+from photoshape_flow.classify.color_prior import color_likelihood
+from photoshape_flow.classify.ranking import PartEvidence, RankingPolicy, rank_part
 from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.pipeline.calibration import (
+    material_lab,
+    stored_color_prior,
+    stored_temperature,
+    substance_networks,
+)
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
 from photoshape_flow.vocab import SUBSTANCES
@@ -61,11 +59,8 @@ log = logging.getLogger(__name__)
 
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
-# 2 flips; 3 colour; 4 calibrated substances; 5 small seen parts keep theirs; 6 substance decided first;
-# 7 parts below the classifier's smallest training region are ranked without its head; 8 and their
-# substance is the substance network's decision
+# the ranking policy's version: part of every row's params_hash (docs/decisions.md lists each version)
 CODE_VERSION = "inference-8"
-COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
 
@@ -196,21 +191,22 @@ class _Context:
         self.color_sigma: float | None = None
         self.model_labs: np.ndarray | None = None
         if method == "classifier" and color_prior:
-            assert self.model is not None
-            prior = color_prior_for(session, store, self.model.materials, classifier)
+            assert self.model is not None and classifier is not None
+            prior = stored_color_prior(session, store, self.model.materials, classifier)
             if prior is not None:
                 self.model_labs, self.color_sigma = prior
-        # part-level temperature of each substance network whose rows weight the ranking
+            else:
+                log.warning("classifier %s has no colour calibration (run the training stage): ranking without "
+                            "the colour likelihood", classifier.id)
+        # part-level temperature of each substance network whose rows weight the ranking (fit by training)
         self.substance_temperatures: dict[int, float | None] = {}
         if method == "classifier" and calibrate_substances:
-            from photoshape_flow.pipeline.substances import substance_temperature
-
-            networks = session.execute(
-                sa.select(m.PartSubstance.classifier_id).where(m.PartSubstance.classifier_id.is_not(None)).distinct()
-            ).scalars().all()
-            session.commit()  # substance_temperature may cache its fit in its own session
-            for network in sorted(networks):
-                self.substance_temperatures[int(network)] = substance_temperature(settings, int(network))
+            for network in substance_networks(session):
+                self.substance_temperatures[network] = stored_temperature(session, network)
+        self.policy: RankingPolicy | None = None
+        if self.model is not None:
+            # materials disabled since training can neither be chosen nor lend their substance mass
+            self.policy = self.model.policy(self.min_region_fraction, enabled=frozenset(self.material_substance))
 
     @property
     def params(self) -> dict[str, Any]:
@@ -229,65 +225,6 @@ class _Context:
         """The part's substance confidence as ranking weights, calibrated for its network."""
         temperature = self.substance_temperatures.get(view.network) if view.network is not None else None
         return substance_vector(temper(view.probs, temperature) if temperature is not None else view.probs)
-
-
-def fit_classifier_color_sigma(
-    session: Session, store: BlobStore, material_labs: dict[int, np.ndarray],
-    classifier: m.Classifier | None = None,
-) -> float | None:
-    """sigma of the colour likelihood from the validation renders (None when there are none).
-
-    With `classifier`, the fit is cached in its `metrics` (`color_sigma`, keyed by the validation
-    renders and the material colours), so `photoshape retrieve` and later inference runs do not
-    re-read hundreds of renders; the caller's session commits it.
-    """
-    from photoshape_flow.pipeline.training import training_data
-
-    data = training_data(session, store)
-    key = _hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
-                 "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
-    metrics = dict(classifier.metrics or {}) if classifier is not None else {}
-    if classifier is not None and metrics.get("color_sigma_key") == key:
-        cached = metrics.get("color_sigma")
-        return None if cached is None else float(cached)
-    sigma = fit_color_sigma(region_color_distances(data.val, material_labs, limit=COLOR_SIGMA_RENDERS))
-    log.info("colour likelihood sigma %s (CIELAB, fit on %d validation renders)",
-             f"{sigma:.2f}" if sigma else "none", min(len(data.val), COLOR_SIGMA_RENDERS))
-    if classifier is not None:
-        classifier.metrics = {**metrics, "color_sigma": sigma, "color_sigma_key": key}
-    return sigma
-
-
-def color_prior_for(
-    session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier | None = None
-) -> tuple[np.ndarray, float] | None:
-    """(material colours in `materials` order, sigma) for the colour likelihood, None without data.
-
-    `classifier`: the material classifier the sigma is cached on (`fit_classifier_color_sigma`).
-    """
-    rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
-    labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
-    sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
-    return (material_lab_matrix(materials, labs), sigma) if sigma is not None else None
-
-
-def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
-    """Median CIELAB colour of a material's render (its preview), else of its albedo."""
-    if material.preview_blob and store.exists(material.preview_blob):
-        image = store.load_image(material.preview_blob)
-        alpha = image[..., 3] / 255.0 if image.ndim == 3 and image.shape[2] == 4 else None
-        rgb = image[..., :3]
-        if rgb.dtype != np.uint8:
-            rgb = (np.clip(rgb.astype(np.float64) / np.iinfo(rgb.dtype).max, 0, 1) * 255).astype(np.uint8)
-        return median_lab(rgb, foreground_of_render(rgb, alpha))
-    albedo = (material.maps or {}).get("albedo")
-    if albedo and store.exists(albedo):
-        return median_lab(store.load_image(albedo)[..., :3])
-    color = (material.params or {}).get("albedo")
-    if color is not None:
-        rgb = (np.clip(np.asarray(color, np.float64), 0, 1) * 255).astype(np.uint8).reshape(1, 1, 3)
-        return median_lab(rgb)
-    return None
 
 
 def _prior_substance(session: Session, part: m.Part, pair_id: int, available: set[str]) -> tuple[str | None, dict]:
@@ -328,33 +265,22 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
             return []
         return color_match(lab, ctx.material_labs, ctx.material_substance, ctx.top_k,
                            substance=None if item.mask is not None else sub.substance)
-    # classifier: material probabilities x substance confidence of the substance network
-    # x the colour likelihood of the part's median colour (observed parts only)
-    assert ctx.model is not None
-    mat_probs, _ = batch[item.part.id]
-    colors = None
-    decided: str | None = None
+    # ours: the evidence of the part, ranked by the one policy (classify.ranking)
+    assert ctx.model is not None and ctx.policy is not None
+    evidence = PartEvidence(material_probs=batch[item.part.id][0], substance=sub.substance)
     if item.mask is not None:
-        if item.mask.sum() < ctx.min_region_fraction * item.mask.size:
-            # smaller than any region the classifier trained on (and the colour likelihood was fit on):
-            # the substance network, trained per pixel, decides the substance; colour orders materials
-            mat_probs = np.ones_like(mat_probs)
-            item.head = False
-            decided = sub.substance
-        weights = ctx.substance_weights(sub)
+        colors = None
         if ctx.color_sigma is not None and ctx.model_labs is not None:
-            colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)[None]
-            item.color = dict(zip(ctx.model.materials, colors[0].tolist(), strict=True))
+            colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)
+            item.color = dict(zip(ctx.model.materials, colors.tolist(), strict=True))
+        evidence = replace(evidence, substance_weights=ctx.substance_weights(sub), color_weights=colors,
+                           region_fraction=float(item.mask.sum()) / item.mask.size)
     else:  # unobserved: only the prior substance's materials
-        weights = one_substance(sub.substance) if sub.substance else substance_vector(None)
-    # materials disabled since training can neither be chosen nor lend their substance mass
-    enabled = ctx.material_substance
-    allowed = np.array([[1.0 if mid in enabled else 0.0 for mid in ctx.model.materials]])
-    colors = allowed if colors is None else colors * allowed
-    ranked = ctx.model.top_k(mat_probs[None], weights[None], k=len(ctx.model.materials), color_weights=colors,
-                             substance_first=True, substances=[decided])[0]
-    kept = [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked if r.material_id in enabled]
-    return kept[: ctx.top_k]
+        evidence = replace(evidence, substance_weights=one_substance(sub.substance) if sub.substance
+                           else substance_vector(None))
+    ranked = rank_part(evidence, ctx.policy, ctx.top_k)
+    item.head = ranked.head_used
+    return [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked.materials]
 
 
 def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, params_hash: str) -> int:

@@ -39,6 +39,7 @@ def training_render_count(session: Session) -> int:
 def run_new_materials(profile: str | Profile = "default", renders_per_material: int = 40,
                       settings: Settings | None = None) -> dict[str, Any]:
     """Render training data that includes the new materials, fine-tune the classifier, re-infer all pairs."""
+    from photoshape_flow.pipeline.calibration import calibrate
     from photoshape_flow.pipeline.inference import run_inference
     from photoshape_flow.pipeline.training import run_training
     from photoshape_flow.pipeline.training_renders import run_training_renders
@@ -57,6 +58,7 @@ def run_new_materials(profile: str | Profile = "default", renders_per_material: 
     target = max(existing, renders_cfg.count) + renders_per_material * len(new_ids)
     renders = run_training_renders("training", target, renders_cfg.size, renders_cfg.spp, settings)
     classifier_id = run_training(prof.training, settings=settings)
+    calibrate(settings, classifier_id)
     inference = run_inference("classifier", classifier_id=classifier_id, top_k=prof.inference.top_k,
                               settings=settings)
     return {

@@ -1,4 +1,9 @@
-"""Stage `training` (section 5.2): train, resume, or fine-tune the material classifier."""
+"""Stage `training` (section 5.2): train, resume, or fine-tune the material classifier, then calibrate.
+
+Calibration (`pipeline.calibration`: the colour likelihood's sigma on the classifier's row, each
+substance network's part temperature on its row) runs here, not in inference, because the substance
+temperature needs the training round's validation renders and inference must only read.
+"""
 
 from __future__ import annotations
 
@@ -13,12 +18,15 @@ NAME = "training"
 
 def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageReport:
     from photoshape_flow.db import models as m
+    from photoshape_flow.pipeline.calibration import calibrate
     from photoshape_flow.pipeline.training import run_training
 
     start = time.perf_counter()
     classifier_id = run_training(cfg, settings=ctx.settings)
+    calibration = calibrate(ctx.settings, classifier_id)
     with ctx.session() as session:
         clf = session.get(m.Classifier, classifier_id)
         assert clf is not None
-        details = {"classifier_id": classifier_id, "name": clf.name, "status": clf.status, "metrics": clf.metrics}
+        details = {"classifier_id": classifier_id, "name": clf.name, "status": clf.status, "metrics": clf.metrics,
+                   "calibration": calibration}
     return StageReport(NAME, done=1, seconds=time.perf_counter() - start, details=details)

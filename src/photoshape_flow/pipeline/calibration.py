@@ -1,0 +1,143 @@
+"""Calibrations of the ranking's evidence, fitted before inference and stored on each network's row.
+
+Two numbers make the product of experts in `classify.ranking` weigh its experts right:
+
+- the colour likelihood's sigma (how far lighting, UV scale and shading move a material's median
+  colour), fit by robust maximum likelihood on the validation training renders, cached in the
+  material classifier's `metrics` (`color_sigma`, keyed by those renders and the material colours);
+- each substance network's part-level temperature (`pipeline.substances.substance_temperature`),
+  fit on the validation renders of both rounds and cached in that network's `metrics`.
+
+The training stage fits both once its classifier exists (the temperature needs the training round's
+validation renders too); inference and `photoshape retrieve` only read them, so ranking never
+re-reads hundreds of renders and two workers never race to fit the same number.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.classify.assignment import foreground_of_render, median_lab
+from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.config import Settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.store import BlobStore
+
+log = logging.getLogger(__name__)
+
+COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
+
+
+def _hash(payload: Any) -> str:
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def fit_classifier_color_sigma(
+    session: Session, store: BlobStore, material_labs: dict[int, np.ndarray],
+    classifier: m.Classifier | None = None,
+) -> float | None:
+    """sigma of the colour likelihood from the validation renders (None when there are none).
+
+    With `classifier`, the fit is cached in its `metrics` (`color_sigma`, keyed by the validation
+    renders and the material colours), so `photoshape retrieve` and later inference runs do not
+    re-read hundreds of renders; the caller's session commits it.
+    """
+    from photoshape_flow.pipeline.training import training_data
+
+    data = training_data(session, store)
+    key = _hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
+                 "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
+    metrics = dict(classifier.metrics or {}) if classifier is not None else {}
+    if classifier is not None and metrics.get("color_sigma_key") == key:
+        cached = metrics.get("color_sigma")
+        return None if cached is None else float(cached)
+    sigma = fit_color_sigma(region_color_distances(data.val, material_labs, limit=COLOR_SIGMA_RENDERS))
+    log.info("colour likelihood sigma %s (CIELAB, fit on %d validation renders)",
+             f"{sigma:.2f}" if sigma else "none", min(len(data.val), COLOR_SIGMA_RENDERS))
+    if classifier is not None:
+        classifier.metrics = {**metrics, "color_sigma": sigma, "color_sigma_key": key}
+    return sigma
+
+
+def color_prior_for(
+    session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier | None = None
+) -> tuple[np.ndarray, float] | None:
+    """(material colours in `materials` order, sigma) for the colour likelihood, None without data.
+
+    `classifier`: the material classifier the sigma is cached on (`fit_classifier_color_sigma`).
+    """
+    rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
+    labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
+    sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
+    return (material_lab_matrix(materials, labs), sigma) if sigma is not None else None
+
+
+def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
+    """Median CIELAB colour of a material's render (its preview), else of its albedo."""
+    if material.preview_blob and store.exists(material.preview_blob):
+        image = store.load_image(material.preview_blob)
+        alpha = image[..., 3] / 255.0 if image.ndim == 3 and image.shape[2] == 4 else None
+        rgb = image[..., :3]
+        if rgb.dtype != np.uint8:
+            rgb = (np.clip(rgb.astype(np.float64) / np.iinfo(rgb.dtype).max, 0, 1) * 255).astype(np.uint8)
+        return median_lab(rgb, foreground_of_render(rgb, alpha))
+    albedo = (material.maps or {}).get("albedo")
+    if albedo and store.exists(albedo):
+        return median_lab(store.load_image(albedo)[..., :3])
+    color = (material.params or {}).get("albedo")
+    if color is not None:
+        rgb = (np.clip(np.asarray(color, np.float64), 0, 1) * 255).astype(np.uint8).reshape(1, 1, 3)
+        return median_lab(rgb)
+    return None
+
+
+
+
+def stored_color_prior(
+    session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier
+) -> tuple[np.ndarray, float] | None:
+    """(material colours in `materials` order, the classifier's stored sigma); None when not calibrated."""
+    sigma = (classifier.metrics or {}).get("color_sigma")
+    if sigma is None:
+        return None
+    rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
+    labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
+    return (material_lab_matrix(materials, labs), float(sigma)) if labs else None
+
+
+def stored_temperature(session: Session, network_id: int) -> float | None:
+    """A substance network's stored part-level temperature (None: not fitted, or too few parts)."""
+    row = session.get(m.Classifier, network_id)
+    value = (row.metrics or {}).get("part_temperature") if row is not None else None
+    return None if value is None else float(value)
+
+
+def substance_networks(session: Session) -> list[int]:
+    """The substance networks whose part substances weight the ranking."""
+    return sorted(int(n) for n in session.execute(
+        sa.select(m.PartSubstance.classifier_id).where(m.PartSubstance.classifier_id.is_not(None)).distinct()
+    ).scalars())
+
+
+def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
+    """Fit (or confirm the cached) colour sigma of a material classifier and every substance temperature."""
+    from photoshape_flow.pipeline.substances import substance_temperature
+
+    store = BlobStore(settings.blob_root)
+    with session_scope(settings.resolved_database_url) as session:
+        classifier = session.get(m.Classifier, classifier_id)
+        if classifier is None:
+            raise LookupError(f"no classifier with id {classifier_id}")
+        prior = color_prior_for(session, store, [int(x) for x in classifier.materials if int(x) != 0], classifier)
+        networks = substance_networks(session)
+    temperatures = {str(n): substance_temperature(settings, n) for n in networks}
+    return {"color_sigma": None if prior is None else prior[1], "substance_temperatures": temperatures}
