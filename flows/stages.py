@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from typing import Any, Literal
 
-from photoshape_flow.flows.artifacts import Progress
+from photoshape_flow.flows.artifacts import Progress, publish_candidates_table
 from photoshape_flow.flows.tasks import finish_stage, plan_batches, process_batch, run_whole_stage, task_runner
 from prefect import Flow, flow
 from prefect.futures import as_completed
@@ -48,7 +48,10 @@ def _stage_flow(stage: Stage) -> Flow:
     if stage.fans_out:
         def body(profile: ProfileName = "default", overrides: list[str] | None = None,
                  batch_size: int = stage.batch_size) -> dict[str, Any]:
-            return fan_out(name, profile, overrides, batch_size)
+            result = fan_out(name, profile, overrides, batch_size)
+            if name == "publish":  # what the UI shows of a publish: the candidates, best first
+                publish_candidates_table()
+            return result
     else:
         def body(profile: ProfileName = "default", overrides: list[str] | None = None) -> dict[str, Any]:  # type: ignore[misc]
             return run_whole_stage(name, profile, overrides)

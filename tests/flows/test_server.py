@@ -102,8 +102,9 @@ def test_dask_worker_processes_fan_out_a_stage(prefect_server: dict[str, str], t
     made = make_aligned_pairs(settings.resolved_database_url, BlobStore(settings.blob_root), n_pairs=6)
     runner = DaskTaskRunner(cluster_kwargs={"n_workers": 2, "threads_per_worker": 1, "processes": True})
     with temporary_settings({PREFECT_API_URL: prefect_server["PREFECT_API_URL"]}):
-        result = inference.with_options(task_runner=runner)(profile="tiny", methods=["color-match"], batch_size=2)
-    assert result["color-match"] == {"batches": 3, "items": 6, "claimed": 6}
+        result = inference.with_options(task_runner=runner)(
+            profile="tiny", overrides=["inference.methods=color-match"], batch_size=2)
+    assert (result["batches"], result["items"], result["done"], result["failed"]) == (3, 6, 6, 0)
     with session_scope() as session:
         workers = session.execute(sa.select(m.WorkClaim.worker).where(m.WorkClaim.state == "done")).scalars().all()
         pairs = session.execute(sa.select(sa.func.count(sa.distinct(m.Assignment.pair_id)))).scalar_one()
@@ -150,7 +151,7 @@ def test_process_work_pool_with_two_workers_runs_deployments(prefect_server: dic
         run_ids: list[str] = []
         for method in ("color-match", "no-classifier"):
             out = subprocess.run([prefect, "deployment", "run", "inference/inference", "--param", "profile=tiny",
-                                  "--param", f'methods=["{method}"]', "--param", "batch_size=2"],
+                                  "--param", f'overrides=["inference.methods={method}"]', "--param", "batch_size=2"],
                                  env=env, capture_output=True, text=True, check=True)
             run_ids += re.findall(r"UUID: ([0-9a-f-]{36})", out.stdout)
         assert len(run_ids) == 2, run_ids
