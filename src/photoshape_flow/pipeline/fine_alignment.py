@@ -15,8 +15,6 @@ columns), silhouette IoU for the others.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import time
 from collections import OrderedDict
@@ -35,6 +33,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -60,7 +59,7 @@ def alignment_hash(params: FineParams, method: str, item: Mapping[str, Any]) -> 
         "mask": item["mask_blob"],
         "camera": [round(float(item[k]), 9) for k in ("azimuth", "elevation", "camera_distance", "fov")],
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+    return stable_hash(payload)
 
 
 def _candidates(session: Session, pair_ids: Iterable[int] | None, method: str) -> list[dict[str, Any]]:

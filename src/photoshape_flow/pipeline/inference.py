@@ -36,7 +36,6 @@ from photoshape_flow.classify.assignment import (
     RankedMaterial,
     color_match,
     foreground_of_render,
-    item_seed,
     median_lab,
     one_substance,
     random_of_substance,
@@ -53,6 +52,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.hashing import item_seed
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
 from photoshape_flow.vocab import SUBSTANCES
