@@ -26,7 +26,8 @@ import torch
 from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.dataset import make_input
 from photoshape_flow.classify.resnet import MaterialResNet
-from photoshape_flow.classify.train import material_substance_index, resolve_device
+from photoshape_flow.classify.train import material_substance_index
+from photoshape_flow.devices import resolve_device
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 CropMode = Literal["image", "mask"]
