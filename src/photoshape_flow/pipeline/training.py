@@ -42,6 +42,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -361,7 +362,7 @@ def run_training(
         with session_scope(url) as session:
             session.execute(
                 sa.update(Classifier).where(Classifier.id == classifier_id).values(
-                    status=STATUS_FAILED, error=f"{exc.__class__.__name__}: {exc}".splitlines()[0][:500],
+                    status=STATUS_FAILED, error=error_line(exc),
                     updated_at=utcnow(),
                 )
             )
