@@ -37,7 +37,9 @@ from photoshape_flow.demo.exemplars import (
     sample_camera,
     sample_degradation,
 )
-from photoshape_flow.demo.furniture import KIND_WEIGHTS, KINDS, Furniture, generate_furniture, perturb_design
+from photoshape_flow.demo.furniture import generate_furniture
+from photoshape_flow.demo.furniture.design import KIND_WEIGHTS, KINDS, perturb_design
+from photoshape_flow.demo.furniture.model import Furniture
 from photoshape_flow.demo.groundtruth import GROUNDTRUTH_VERSION
 from photoshape_flow.demo.materials import MAP_CHANNELS, MaterialRecipe, select_recipes, write_material
 from photoshape_flow.demo.obj import mtl_text, obj_text
