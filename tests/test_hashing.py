@@ -1,4 +1,4 @@
-"""`hashing`: the values stored rows depend on stay what the former per-module copies computed."""
+"""`hashing`: the hash and seed conventions that stored rows depend on, pinned to their formulas."""
 
 from __future__ import annotations
 
