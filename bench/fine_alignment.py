@@ -53,7 +53,8 @@ def nearest_view(views: list, azimuth: float, elevation: float):  # type: ignore
 
 def make_pairs(renderer, n_exact: int, n_similar: int, size: int, jitter_deg: float, seed: int) -> list[dict]:  # type: ignore[no-untyped-def]
     from photoshape_flow.demo.exemplars import sample_camera
-    from photoshape_flow.demo.furniture import generate_furniture, perturb_design
+    from photoshape_flow.demo.furniture import generate_furniture
+    from photoshape_flow.demo.furniture.design import perturb_design
     from photoshape_flow.render import Camera
     from photoshape_flow.render.testing import paper_viewpoints
 

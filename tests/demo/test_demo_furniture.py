@@ -8,14 +8,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from photoshape_flow.demo.furniture import (
-    KINDS,
-    ROLES,
-    build_components,
-    generate_furniture,
-    perturb_design,
-    sample_design,
-)
+from photoshape_flow.demo.furniture import generate_furniture
+from photoshape_flow.demo.furniture.design import KINDS, perturb_design, sample_design
+from photoshape_flow.demo.furniture.kinds import build_components
+from photoshape_flow.demo.furniture.model import ROLES
 from photoshape_flow.demo.obj import mtl_text, obj_text
 from photoshape_flow.demo.seeding import child_rng
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from tests.geometry.makers import write_chair_obj
 
-from photoshape_flow.geometry.obj import parse_mtl, parse_obj, referenced_files, roughness_from_ns, texture_filename
+from photoshape_flow.geometry.mtl import parse_mtl, roughness_from_ns, texture_filename
+from photoshape_flow.geometry.obj import parse_obj, referenced_files
 from photoshape_flow.geometry.raw import BadShapeError, ShapeTooLargeError
 
 

@@ -18,13 +18,13 @@ from photoshape_flow.align.retrieval import ArrayDatabase, search
 from photoshape_flow.align.viewpoints import ViewpointParams, viewpoints
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.pipeline.coarse.pairs import DROPPED_REASON
+from photoshape_flow.pipeline.coarse.reverse_index import match_scope
+from photoshape_flow.pipeline.coarse.viewpoint_sets import ensure_viewpoint_set
 from photoshape_flow.pipeline.coarse_alignment import (
-    DROPPED_REASON,
     CoarseConfig,
-    ensure_viewpoint_set,
     evaluate_coarse_alignment,
     load_reverse_index,
-    match_scope,
     run_coarse_alignment,
 )
 from photoshape_flow.render.testing import box_part, normalise_to_unit_cube

@@ -15,8 +15,6 @@ Renders and exemplars go through the same steps, so their descriptors are compar
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -24,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from photoshape_flow.align.hog import channel_indices, hog_descriptor, hog_grid
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.squares import crop_square, square_box
 
 DESCRIPTOR_CODE_VERSION = 1  # bump when the computation changes in a way the params do not show
@@ -88,8 +87,7 @@ class HogParams:
 
     def params_hash(self, **extra: Any) -> str:
         """sha256 of these parameters plus `extra` inputs (mesh ref, viewpoint set, ...)."""
-        payload = json.dumps({"hog": self.to_dict(), **extra}, sort_keys=True, default=str)
-        return hashlib.sha256(payload.encode()).hexdigest()
+        return stable_hash({"hog": self.to_dict(), **extra})
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:

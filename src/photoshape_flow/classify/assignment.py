@@ -15,7 +15,6 @@ the substance network's per-part probabilities, and writes the ranked results as
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -30,12 +29,6 @@ class RankedMaterial:
     material_id: int
     substance: str
     score: float
-
-
-def item_seed(*parts: object) -> int:
-    """A stable 64-bit seed from an item's natural key (same key -> same random draws)."""
-    digest = hashlib.sha256("/".join(str(p) for p in parts).encode()).digest()
-    return int.from_bytes(digest[:8], "little")
 
 
 def substance_vector(probs: Mapping[str, float] | None) -> np.ndarray:

@@ -24,7 +24,7 @@ from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.dataset import make_input
 from photoshape_flow.classify.ranking import RankingPolicy
 from photoshape_flow.classify.resnet import MaterialResNet
-from photoshape_flow.classify.train import resolve_device
+from photoshape_flow.devices import resolve_device
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 CropMode = Literal["image", "mask"]

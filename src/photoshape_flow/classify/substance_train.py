@@ -42,15 +42,6 @@ from photoshape_flow.vocab import SUBSTANCE_LABELS
 log = logging.getLogger(__name__)
 
 
-def resolve_device(setting: str) -> str:
-    """settings.device -> a torch device string ("auto": cuda when available)."""
-    if setting == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if setting == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("settings.device is 'cuda' but torch sees no CUDA device")
-    return setting
-
-
 @dataclass
 class SubstanceData:
     """Images (H, W, 3) uint8 and label maps (H, W) uint8 (SUBSTANCE_LABELS indices); sizes may vary."""

@@ -43,15 +43,6 @@ log = logging.getLogger(__name__)
 METRIC_KEYS = ("mtl@1", "mtl@5", "sub@1", "sub-mtl@1")
 
 
-def resolve_device(name: str = "auto") -> torch.device:
-    """`settings.device` to a torch device: auto -> cuda when available, else cpu."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("device 'cuda' requested but torch sees no CUDA device")
-    return torch.device(name)
-
-
 def make_loss(config: ClassifierConfig) -> MultitaskLoss:
     return MultitaskLoss(
         mode=config.loss_mode,  # type: ignore[arg-type]

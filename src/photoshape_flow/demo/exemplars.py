@@ -17,7 +17,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from photoshape_flow.demo.furniture import SUBSTANCE_PRIOR, Furniture
+from photoshape_flow.demo.furniture.model import SUBSTANCE_PRIOR, Furniture
 from photoshape_flow.demo.materials import MaterialRecipe
 
 ELEVATION_RANGE = (-math.pi / 16, math.pi / 4)

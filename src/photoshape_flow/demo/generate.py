@@ -37,12 +37,15 @@ from photoshape_flow.demo.exemplars import (
     sample_camera,
     sample_degradation,
 )
-from photoshape_flow.demo.furniture import KIND_WEIGHTS, KINDS, Furniture, generate_furniture, perturb_design
+from photoshape_flow.demo.furniture import generate_furniture
+from photoshape_flow.demo.furniture.design import KIND_WEIGHTS, KINDS, perturb_design
+from photoshape_flow.demo.furniture.model import Furniture
 from photoshape_flow.demo.groundtruth import GROUNDTRUTH_VERSION
 from photoshape_flow.demo.materials import MAP_CHANNELS, MaterialRecipe, select_recipes, write_material
 from photoshape_flow.demo.obj import mtl_text, obj_text
 from photoshape_flow.demo.seeding import child_rng
 from photoshape_flow.demo.writing import write_bytes, write_text
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.vocab import SUBSTANCES
 
 log = logging.getLogger(__name__)
@@ -321,7 +324,7 @@ def generate_demo(
     material_dirs = {}
     for r in recipes:
         rel = f"materials/{r.name}"
-        stamp = _sha(json.dumps([asdict(r), seed, preset.texture_resolution, GENERATOR_VERSION], sort_keys=True))
+        stamp = stable_hash([asdict(r), seed, preset.texture_resolution, GENERATOR_VERSION])
         if not fresh(rel, stamp, [f"{ch}.png" for ch in MAP_CHANNELS] + ["material.json"]):
             write_material(root / rel, r, seed, preset.texture_resolution)
         material_dirs[r.name] = root / rel
@@ -335,7 +338,7 @@ def generate_demo(
     for folder, specs in (("envmaps", studios), ("groundtruth/envmaps", held_studios)):
         for spec in specs:
             rel = f"{folder}/{spec.name}.hdr"
-            stamp = _sha(json.dumps([spec.to_json(), preset.envmap_width, GENERATOR_VERSION], sort_keys=True))
+            stamp = stable_hash([spec.to_json(), preset.envmap_width, GENERATOR_VERSION])
             if not fresh(rel, stamp, [""]):
                 write_studio(root / rel, spec, preset.envmap_width)
             if folder == "envmaps":

@@ -16,11 +16,17 @@ Schema (version 1), paths relative to the demo folder:
                           "visible_parts": [name, ...],            # parts with pixels in the mask
                           "envmap": {"name", "rotation", "scale"},
                           "degradation": {...}, "spec_hash": str}}}
+
+The evaluators take the typed `GroundTruth` or, in tests and scripts, a plain mapping from an
+exemplar's stem to a dict with the same field names; `exemplar_records`, `record_for_source`,
+`record_field` and `record_mask` read both alike, so every evaluator matches exemplars to records
+and reads their fields the same way.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -93,12 +99,7 @@ class ExemplarTruth:
 
     def load_mask(self) -> np.ndarray:
         """The part-index mask (H, W) in the exemplar's native frame; 0 = background."""
-        import cv2
-
-        mask = cv2.imread(str(self.mask), cv2.IMREAD_UNCHANGED)
-        if mask is None:
-            raise FileNotFoundError(f"{self.mask}: cannot read the part mask")
-        return mask
+        return read_part_mask(self.mask)
 
     def substance_mask(self, substances: tuple[str, ...]) -> np.ndarray:
         """(H, W) labels: 0 background, 1 + substances.index(s) for parts of substance s."""
@@ -188,6 +189,57 @@ def load_groundtruth(path: Path | str) -> GroundTruth:
     except (OSError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: cannot read ground truth ({exc})") from exc
     return parse_groundtruth(data, path.parent)
+
+
+def read_part_mask(path: Path) -> np.ndarray:
+    """A part-index mask file as stored (values are part numbers, 0 = background)."""
+    import cv2
+
+    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if mask is None:
+        raise FileNotFoundError(f"{path}: cannot read the part mask")
+    return mask
+
+
+def exemplar_records(groundtruth: Any) -> dict[str, Any]:
+    """stem -> exemplar record: the ``exemplars`` of a `GroundTruth`, or a plain mapping itself."""
+    return dict(getattr(groundtruth, "exemplars", groundtruth))
+
+
+def source_keys(source_id: str) -> tuple[str, str, str]:
+    """The keys a ground truth may list an ingested exemplar under, most specific first: its
+    source_id, the file name in it, and that name without its extension (the demo's stem)."""
+    name = source_id.rsplit("/", 1)[-1]
+    return source_id, name, name.rsplit(".", 1)[0]
+
+
+def record_for_source(records: Mapping[str, Any], source_id: str) -> Any | None:
+    """The record of the exemplar ingested as `source_id` (see `source_keys`), or None."""
+    for key in source_keys(source_id):
+        if key in records:
+            return records[key]
+    return None
+
+
+def record_field(record: Any, *names: str, default: Any = None) -> Any:
+    """The first of `names` that a record (mapping or object) holds with a value other than None."""
+    for name in names:
+        value = record.get(name) if isinstance(record, Mapping) else getattr(record, name, None)
+        if value is not None:
+            return value
+    return default
+
+
+def record_mask(record: Any, root: Path | None) -> np.ndarray:
+    """A record's native-frame part mask: `ExemplarTruth.load_mask`, or its ``mask`` path (relative
+    paths against `root`, the ground truth's folder)."""
+    loader = getattr(record, "load_mask", None)
+    if callable(loader):
+        return np.asarray(loader())
+    path = Path(record_field(record, "mask"))
+    if root is not None and not path.is_absolute():
+        path = root / path
+    return read_part_mask(path)
 
 
 def newest_groundtruth(data_root: Path | str) -> Path | None:

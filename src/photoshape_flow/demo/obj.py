@@ -11,7 +11,7 @@ import io
 
 import numpy as np
 
-from photoshape_flow.demo.furniture import Furniture
+from photoshape_flow.demo.furniture.model import Furniture
 
 
 def _block(prefix: str, rows: np.ndarray, fmt: str) -> str:

@@ -3,15 +3,11 @@ platform, and adding items never shifts the streams of others (unlike drawing fr
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
-
-def child_seed(seed: int, *keys: object) -> int:
-    text = ":".join([str(int(seed)), *(str(k) for k in keys)])
-    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little")
+from photoshape_flow.hashing import item_seed
 
 
 def child_rng(seed: int, *keys: object) -> np.random.Generator:
-    return np.random.default_rng(child_seed(seed, *keys))
+    """The generator of the stream named by `keys` under the demo's `seed`."""
+    return np.random.default_rng(item_seed(int(seed), *keys, sep=":"))

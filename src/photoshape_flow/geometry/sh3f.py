@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from photoshape_flow.geometry.archive import SafeZip, join_member, normalise_member
-from photoshape_flow.geometry.obj import mtl_references, obj_references
+from photoshape_flow.geometry.mtl import mtl_references
+from photoshape_flow.geometry.obj import obj_references
 from photoshape_flow.geometry.raw import BadShapeError
 
 CATALOG_FILE = "PluginFurnitureCatalog.properties"

@@ -15,8 +15,6 @@ re-reads hundreds of renders and two workers never race to fit the same number.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from collections.abc import Sequence
 from typing import Any
@@ -30,15 +28,13 @@ from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_m
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
 
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 
-
-def _hash(payload: Any) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def fit_classifier_color_sigma(
@@ -54,7 +50,7 @@ def fit_classifier_color_sigma(
     from photoshape_flow.pipeline.training import training_data
 
     data = training_data(session, store)
-    key = _hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
+    key = stable_hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
                  "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
     metrics = dict(classifier.metrics or {}) if classifier is not None else {}
     if classifier is not None and metrics.get("color_sigma_key") == key:

@@ -15,13 +15,10 @@ columns), silhouette IoU for the others.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import time
 from collections import OrderedDict
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -35,6 +32,9 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.demo.groundtruth import exemplar_records, record_field, record_for_source, record_mask
+from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -42,11 +42,6 @@ log = logging.getLogger(__name__)
 STAGE = "fine-alignment"
 DEFAULT_METHOD = "flow-crf"
 UNMATCHED = np.uint16(65535)  # ground-truth part with no same-named part in the shape
-
-
-def _one_line(exc: BaseException) -> str:
-    text = f"{type(exc).__name__}: {exc}".splitlines()
-    return text[0][:500] if text else type(exc).__name__
 
 
 def alignment_hash(params: FineParams, method: str, item: Mapping[str, Any]) -> str:
@@ -60,7 +55,7 @@ def alignment_hash(params: FineParams, method: str, item: Mapping[str, Any]) -> 
         "mask": item["mask_blob"],
         "camera": [round(float(item[k]), 9) for k in ("azimuth", "elevation", "camera_distance", "fov")],
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+    return stable_hash(payload)
 
 
 def _candidates(session: Session, pair_ids: Iterable[int] | None, method: str) -> list[dict[str, Any]]:
@@ -200,7 +195,7 @@ def run_fine_alignment(
         try:
             columns = _align_item(item, params, store, renderer, meshes)
         except Exception as exc:  # one bad pair must not stop the batch
-            error = _one_line(exc)
+            error = error_line(exc)
             log.warning("fine alignment of pair %s failed: %s", item["pair_id"], error)
             columns = _failed_columns(error, params)
             summary["failed"] += 1
@@ -222,31 +217,6 @@ def run_fine_alignment(
 
 
 # -- evaluation against ground truth --------------------------------------------------------------
-
-
-def _truth_entries(groundtruth: Any) -> dict[str, Any]:
-    return dict(getattr(groundtruth, "exemplars", groundtruth))
-
-
-def _field(entry: Any, name: str, default: Any = None) -> Any:
-    if isinstance(entry, Mapping):
-        return entry.get(name, default)
-    return getattr(entry, name, default)
-
-
-def _load_truth_mask(entry: Any, root: Path | None) -> np.ndarray:
-    loader = getattr(entry, "load_mask", None)
-    if callable(loader):
-        return np.asarray(loader())
-    import cv2
-
-    path = Path(_field(entry, "mask"))
-    if root is not None and not path.is_absolute():
-        path = root / path
-    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if mask is None:
-        raise FileNotFoundError(f"{path}: cannot read the part mask")
-    return mask
 
 
 def truth_in_stored_frame(
@@ -283,7 +253,7 @@ def evaluate_fine_alignment(
     """
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
-    truths = _truth_entries(groundtruth)
+    truths = exemplar_records(groundtruth)
     root = getattr(groundtruth, "root", None)
     rows = session.execute(
         sa.select(m.Alignment, m.Exemplar, m.Shape)
@@ -297,11 +267,12 @@ def evaluate_fine_alignment(
     iou_other: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
     skipped = 0
     for alignment, exemplar, shape in rows:
-        stem = exemplar.source_id.rsplit("/", 1)[-1]
-        entry = truths.get(exemplar.source_id, truths.get(stem, truths.get(stem.rsplit(".", 1)[0])))
+        entry = record_for_source(truths, exemplar.source_id)
         if entry is None:
             continue
-        exact = str(_field(entry, "shape")) == shape.source_id and bool(_field(entry, "in_collection", True))
+        exact = str(record_field(entry, "shape")) == shape.source_id and bool(
+            record_field(entry, "in_collection", default=True)
+        )
         if not exact:
             for name in iou_other:
                 value = getattr(alignment, f"iou_{name}")
@@ -315,8 +286,8 @@ def evaluate_fine_alignment(
         maps = {name: store.load_image(getattr(alignment, f"{name}_blob")) for name in ("coarse", "flow", "crf")}
         size = maps["crf"].shape[0]
         parts_by_name = {p.name: int(p.index) for p in shape.parts}
-        part_names = {int(k): str(v) for k, v in (_field(entry, "part_names") or {}).items()}
-        truth = truth_in_stored_frame(_load_truth_mask(entry, root), crop, part_names, parts_by_name, size)
+        part_names = {int(k): str(v) for k, v in (record_field(entry, "part_names") or {}).items()}
+        truth = truth_in_stored_frame(record_mask(entry, root), crop, part_names, parts_by_name, size)
         scores = {name: part_label_accuracy(maps[name], truth) for name in maps}
         if any(np.isnan(v) for v in scores.values()):
             skipped += 1

@@ -17,8 +17,6 @@ in one transaction.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -32,7 +30,6 @@ from sqlalchemy.orm import Session
 from photoshape_flow.classify.assignment import (
     RankedMaterial,
     color_match,
-    item_seed,
     median_lab,
     one_substance,
     random_of_substance,
@@ -45,6 +42,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.pipeline.calibration import (
     material_lab,
     stored_color_prior,
@@ -130,7 +128,8 @@ def pair_hashes(session: Session, params_hash: str, pair_ids: Sequence[int] | No
         rows = rows.where(m.PartSubstance.pair_id.in_(list(pair_ids)))
     for pair_id, part_id, part_hash in session.execute(rows.order_by(m.PartSubstance.pair_id, m.PartSubstance.part_id)):
         substances.setdefault(pair_id, []).append((part_id, part_hash))
-    return {pair_id: _hash({"params": params_hash, "alignment": alignment, "substances": substances.get(pair_id, [])})
+    return {pair_id: stable_hash({"params": params_hash, "alignment": alignment,
+                                  "substances": substances.get(pair_id, [])})
             for pair_id, alignment in alignments.items()}
 
 
@@ -143,9 +142,6 @@ def pending_pairs(session: Session, method_key: str, expected: dict[int, str]) -
     ).all())
     return [pair_id for pair_id, digest in sorted(expected.items()) if stored.get(pair_id) != digest]
 
-
-def _hash(payload: dict[str, Any]) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 class _Context:
@@ -169,12 +165,10 @@ class _Context:
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
-            import torch
-
             from photoshape_flow.classify.infer import load_classifier
+            from photoshape_flow.devices import set_torch_threads
 
-            if settings.torch_threads:
-                torch.set_num_threads(settings.torch_threads)
+            set_torch_threads(settings.torch_threads)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
             from photoshape_flow.classify.configs import ClassifierConfig
 
@@ -383,7 +377,7 @@ def run_inference(
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
         ctx = _Context(session, store, method, classifier, settings, top_k, color_prior, calibrate_substances)
         method_key = f"classifier:{classifier.id}" if classifier is not None else method
-        expected = pair_hashes(session, _hash(ctx.params), pair_ids)
+        expected = pair_hashes(session, stable_hash(ctx.params), pair_ids)
         todo = pending_pairs(session, method_key, expected)
     summary = InferenceSummary(method_key=method_key)
     stage = f"inference:{method_key}"

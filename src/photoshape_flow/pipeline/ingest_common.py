@@ -10,7 +10,6 @@ a one-line error, a summary line and a log line, and the batch goes on.
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -90,11 +89,6 @@ class IngestLimits:
             max_faces=int(settings.ingest_max_faces),
             max_image_pixels=int(settings.ingest_max_image_megapixels * 1_000_000),
         )
-
-
-def stable_hash(payload: Any) -> str:
-    """sha256 of a JSON rendering with sorted keys (params hashes)."""
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def files_hash(paths: Iterable[Path], base: Path | None = None) -> str:

@@ -22,6 +22,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError, WorkerTimeoutError
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.hdr import HDR_SUFFIXES, BadEnvmapError, EnvmapLimits, validate_envmap
 from photoshape_flow.pipeline.ingest_common import (
     IngestLimits,
@@ -31,7 +32,6 @@ from photoshape_flow.pipeline.ingest_common import (
     iter_files,
     one_line,
     resolve_settings,
-    stable_hash,
     store_for,
 )
 from photoshape_flow.store import BlobStore, sha256_file

@@ -25,6 +25,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.dedupe import DEFAULT_RADIUS, DESCRIPTOR, assign_duplicates, dense_hog
 from photoshape_flow.imaging.exemplar import ExemplarOptions, prepare_exemplar
 from photoshape_flow.imaging.io import BadImageError, read_image
@@ -35,7 +36,6 @@ from photoshape_flow.pipeline.ingest_common import (
     iter_files,
     one_line,
     resolve_settings,
-    stable_hash,
     store_for,
 )
 from photoshape_flow.store import BlobStore, sha256_file

@@ -27,6 +27,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.events import EventSink
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.svbrdf import (
     SIDECARS,
     BadMaterialError,
@@ -41,7 +42,6 @@ from photoshape_flow.pipeline.ingest_common import (
     files_hash,
     one_line,
     resolve_settings,
-    stable_hash,
     store_for,
 )
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED

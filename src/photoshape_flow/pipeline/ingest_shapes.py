@@ -31,6 +31,7 @@ from photoshape_flow.geometry.prepare import TEXTURE_PLACEHOLDER, PreparedShape,
 from photoshape_flow.geometry.preprocess import PreprocessOptions
 from photoshape_flow.geometry.raw import BadShapeError
 from photoshape_flow.geometry.sources import RejectedInput, ShapeItem, discover_shapes, materialize
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.ingest_common import (
     IngestLimits,
     IngestSummary,
@@ -38,7 +39,6 @@ from photoshape_flow.pipeline.ingest_common import (
     one_line,
     resolve_settings,
     split_for,
-    stable_hash,
     store_for,
 )
 from photoshape_flow.store import BlobStore

@@ -44,6 +44,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.photoshapes import (
     DEFAULT_METHOD,
@@ -60,9 +61,6 @@ log = logging.getLogger(__name__)
 
 FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
 
-
-def _hash(payload: Any) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def item_seed(global_seed: int, kind: str, key: str) -> int:
@@ -161,7 +159,7 @@ def run_publish(
                 fingerprint["parts"] = [{"part": p.index, "builtin": p.builtin_material} for p in item.mesh.parts]
             params = {"camera": camera.to_dict(), "size": size, "spp": spp, "floor": floor, "seed": seed,
                       "method_key": method_key, "envmap": summary.envmap, "background": "white"}
-            params_hash = _hash({**fingerprint, **params})
+            params_hash = stable_hash({**fingerprint, **params})
             if existing[kind].get(key) == (params_hash, STATUS_OK):
                 summary.skipped += 1
                 continue
@@ -203,7 +201,7 @@ def run_publish(
 def _export(item: PhotoShape, formats: Sequence[str], settings: Settings, store: BlobStore, size: int, spp: int,
             summary: PublishSummary, fail: Any, export_photoshape: Any) -> None:
     out = export_dir(item.pair_id, item.method_key, settings)
-    params_hash = _hash({**item.fingerprint, "document": item.document, "formats": list(formats),
+    params_hash = stable_hash({**item.fingerprint, "document": item.document, "formats": list(formats),
                          "camera": item.camera.to_dict(), "size": size, "spp": spp})
     manifest = export_manifest(item.pair_id, item.method_key, settings)
     if manifest and manifest.get("status") == STATUS_OK and manifest.get("params_hash") == params_hash \

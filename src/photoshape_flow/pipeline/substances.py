@@ -26,8 +26,6 @@ Incremental and idempotent: a pair is skipped when all its parts' rows carry the
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from dataclasses import replace
 from typing import Any
@@ -40,6 +38,8 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.devices import resolve_device, set_torch_threads
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS
@@ -49,10 +49,6 @@ log = logging.getLogger(__name__)
 ALIGNMENT_METHOD = "flow-crf"
 STATUS_TRAINING = "training"
 RULE_VERSION = "part-substances-v2"  # v2: flip-averaged substance probabilities
-
-
-def _hash(payload: Any) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 # -- training ----------------------------------------------------------------------------------------
@@ -89,7 +85,7 @@ def load_bootstrap_data(session: sa.orm.Session, store: BlobStore) -> tuple[Any,
         signature.append([key, params_hash])
     train = SubstanceData(*parts["train"])
     val = SubstanceData(*parts["val"])
-    return train, val, _hash(signature)
+    return train, val, stable_hash(signature)
 
 
 def _load_label_map(store: BlobStore, ref: str) -> np.ndarray:
@@ -103,18 +99,15 @@ def train_or_resume(
     settings: Settings, train_config: str | SubstanceTrainConfig = "cpu", **overrides: Any
 ) -> tuple[int, Any, dict[str, Any]]:
     """Train the substance network (or resume / reuse it); returns (classifier_id, model, info)."""
-    import torch
 
     from photoshape_flow.classify.substance_train import (
         checkpoint_from_bytes,
         checkpoint_to_bytes,
         load_model,
-        resolve_device,
         train_substance_net,
     )
 
-    if settings.torch_threads:
-        torch.set_num_threads(settings.torch_threads)
+    set_torch_threads(settings.torch_threads)
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
     device = resolve_device(settings.device)
@@ -126,7 +119,7 @@ def train_or_resume(
         if len(train) == 0:
             raise ValueError("no usable bootstrap renders: run the bootstrap round first")
         # the device does not change the result's meaning, so it stays out of the hash
-        params_hash = _hash({"config": {**config.to_dict(), "device": None}, "data": data_hash})
+        params_hash = stable_hash({"config": {**config.to_dict(), "device": None}, "data": data_hash})
         row = session.execute(sa.select(m.Classifier).where(m.Classifier.name == name)).scalar_one_or_none()
         checkpoint = None
         if row is not None and row.params_hash == params_hash and row.checkpoint_blob:
@@ -222,7 +215,6 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
         checkpoint_from_bytes,
         load_model,
         predict_substances,
-        resolve_device,
     )
 
     url = settings.resolved_database_url
@@ -233,7 +225,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
             return None
         metrics = dict(row.metrics or {})
         renders = calibration_renders(session)
-        cache_key = _hash([row.checkpoint_blob, [key for key, _ in renders]])
+        cache_key = stable_hash([row.checkpoint_blob, [key for key, _ in renders]])
         if metrics.get("part_temperature_key") == cache_key:
             value = metrics.get("part_temperature")
             return None if value is None else float(value)
@@ -311,7 +303,7 @@ def assign_part_substances(
     for pair_id, shape_id, crf_blob, alignment_hash, image_blob in todo:
         summary["pairs"] += 1
         parts = parts_of.get(shape_id, [])
-        params_hash = _hash(
+        params_hash = stable_hash(
             {"rule": RULE_VERSION, "classifier": checkpoint_ref, "size": size, "min_pixels": min_pixels,
              "part_map": crf_blob, "alignment": alignment_hash, "image": image_blob}
         )

@@ -24,7 +24,6 @@
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 import time
 from collections.abc import Sequence
@@ -41,6 +40,9 @@ from photoshape_flow.db.base import utcnow
 from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.devices import resolve_device, set_torch_threads
+from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -50,10 +52,6 @@ CODE_VERSION = "material-classifier-1"
 STATUS_TRAINING = "training"
 TRAINING_KINDS: tuple[str, ...] = ("training",)
 METRIC_KEYS = ("mtl@1", "mtl@5", "sub@1", "sub-mtl@1")
-
-
-def _sha256(payload: Any) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -82,7 +80,7 @@ def material_set(session: Session) -> MaterialSet:
         ids=tuple(t[0] for t in triples),
         names=tuple(t[1] for t in triples),
         substances=tuple(t[2] for t in triples),
-        hash=_sha256(triples),
+        hash=stable_hash(triples),
     )
 
 
@@ -127,7 +125,7 @@ def training_data(
         (val if is_val else train).append(item)
         manifest.append([kind, key, beauty, ids, "val" if is_val else "train"])
     source = "split" if any_val else ("held-out" if val else "none")
-    return TrainingData(tuple(train), tuple(val), _sha256(manifest), source)
+    return TrainingData(tuple(train), tuple(val), stable_hash(manifest), source)
 
 
 def newest_material_classifier(session: Session) -> Classifier | None:
@@ -229,21 +227,20 @@ def run_training(
     from photoshape_flow.classify import checkpoint as ckpt
     from photoshape_flow.classify.dataset import RegionDataset, find_regions
     from photoshape_flow.classify.resnet import build_model, grow_material_head
-    from photoshape_flow.classify.train import resolve_device, select_best, train_classifier
+    from photoshape_flow.classify.train import select_best, train_classifier
 
     settings = settings or get_settings()
     cfg = config if isinstance(config, ClassifierConfig) else get_config(config, **(overrides or {}))
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
-    if settings.torch_threads:
-        torch.set_num_threads(settings.torch_threads)
+    set_torch_threads(settings.torch_threads)
 
     with session_scope(url) as session:
         materials = material_set(session)
         data = training_data(session, store, kinds, cfg.val_fraction)
     if not materials.ids:
         raise ValueError("no enabled materials with status ok: nothing for the classifier to predict")
-    params_hash = _sha256([CODE_VERSION, config_hash(cfg), materials.hash, data.hash])
+    params_hash = stable_hash([CODE_VERSION, config_hash(cfg), materials.hash, data.hash])
 
     with session_scope(url) as session:
         rows = session.scalars(
@@ -365,7 +362,7 @@ def run_training(
         with session_scope(url) as session:
             session.execute(
                 sa.update(Classifier).where(Classifier.id == classifier_id).values(
-                    status=STATUS_FAILED, error=f"{exc.__class__.__name__}: {exc}".splitlines()[0][:500],
+                    status=STATUS_FAILED, error=error_line(exc),
                     updated_at=utcnow(),
                 )
             )

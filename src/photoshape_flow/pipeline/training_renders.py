@@ -31,8 +31,6 @@ status ``rejected`` (their images too, for inspection) and are not used for trai
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import time
 from collections import defaultdict
@@ -46,6 +44,7 @@ import sqlalchemy as sa
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
@@ -73,7 +72,7 @@ def normalise_split(split: str | None) -> str:
 
 
 def _stable_fraction(text: str) -> float:
-    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little") / 2**64
+    return item_seed(text) / 2**64
 
 
 def derived_val_shapes(keys: Mapping[int, str], fraction: float = VAL_FRACTION) -> set[int]:
@@ -221,10 +220,6 @@ def split_counts(count: int, pools: RenderPools, val_fraction: float = VAL_FRACT
     return {"train": count - n_val, "val": n_val}
 
 
-def _hash(payload: Any) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
-
-
 @dataclass
 class _Inputs:
     """Per-run caches of rows and derived render inputs."""
@@ -253,7 +248,7 @@ class _Inputs:
             for p in spec.parts
         }
         envmap = self.envmaps[spec.envmap.envmap_id]
-        return _hash(
+        return stable_hash(
             {
                 "code": CODE_VERSION,
                 "spec": spec.to_dict(),

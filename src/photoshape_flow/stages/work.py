@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, is_dataclass
 
-from photoshape_flow.pipeline.ingest_common import stable_hash
+from photoshape_flow.hashing import stable_hash
 
 
 @dataclass(frozen=True)

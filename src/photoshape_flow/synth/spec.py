@@ -4,7 +4,8 @@ A `RenderSpec` holds every random number behind one synthetic training image: th
 jittered camera, one material and UV transform per part, the environment map with its radiance
 scale and rotation. It is plain JSON (`to_dict` / `from_dict`), so the `rendering.params` of a row
 reproduce the image exactly, and it is drawn from a generator seeded by the item's natural key
-(`item_seed`), so a resumed or repeated run draws the same numbers for the same key.
+(`hashing.item_seed` of the global seed and the key), so a resumed or repeated run draws the same
+numbers for the same key.
 
 Sampling follows the paper, with the original code's bug fixed (its jitter was `uniform(-x, -x)`,
 a constant):
@@ -30,7 +31,6 @@ pair or an envmap re-renders a small share of the items, not the whole training 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from photoshape_flow.hashing import item_seed
 from photoshape_flow.synth import priors
 
 AZIMUTH_JITTER = math.pi / 12
@@ -59,16 +60,6 @@ SPEC_VERSION = 1
 def item_key(round_: str, split: str, index: int) -> str:
     """The natural key of one training render: ``<round>/<split>/<index:06d>``."""
     return f"{round_}/{split}/{index:06d}"
-
-
-def item_seed(key: str, global_seed: int = 0) -> int:
-    """A 63-bit seed derived from the global seed and the item's natural key (stable across runs)."""
-    digest = hashlib.sha256(f"{int(global_seed)}:{key}".encode()).digest()
-    return int.from_bytes(digest[:8], "little") & ((1 << 63) - 1)
-
-
-def item_rng(key: str, global_seed: int = 0) -> np.random.Generator:
-    return np.random.default_rng(item_seed(key, global_seed))
 
 
 @dataclass(frozen=True)
@@ -230,8 +221,7 @@ def _splitmix64(x: np.ndarray) -> np.ndarray:
 
 
 def _salt(base: int, decision: str) -> np.uint64:
-    digest = hashlib.sha256(f"{base}:{decision}".encode()).digest()
-    return np.uint64(int.from_bytes(digest[:8], "little"))
+    return np.uint64(item_seed(base, decision, sep=":"))
 
 
 def rendezvous_index(base: int, decision: str, ids: Sequence[int]) -> int:
@@ -374,5 +364,5 @@ def sample_render_spec(
 
 def spec_for_key(key: str, global_seed: int, **kwargs: Any) -> RenderSpec:
     """`sample_render_spec` with the generator seeded from the item's natural key."""
-    seed = item_seed(key, global_seed)
+    seed = item_seed(int(global_seed), key, sep=":", bits=63)  # 63 bits: the seed is stored in JSON specs
     return sample_render_spec(np.random.default_rng(seed), key=key, seed=seed, **kwargs)
