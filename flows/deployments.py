@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import importlib
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,41 @@ def prefect_yaml_path() -> Path:
         if candidate.is_file():
             return candidate
     raise FileNotFoundError("prefect.yaml not found next to the flows")
+
+
+# prefect.yaml's stage deployments are written from the stage registry between these two lines
+GENERATED_BEGIN = "  # >>> stage deployments: generated from the stage registry by `photoshape serve --write-yaml`"
+GENERATED_END = "  # <<< end of the generated stage deployments"
+
+
+def stage_deployments_yaml() -> str:
+    """The YAML of one deployment per registered stage (flow, description and exclusivity from the registry)."""
+    from photoshape_flow.stages import REGISTRY
+
+    lines = [GENERATED_BEGIN]
+    for stage in REGISTRY:
+        lines += [
+            f"  - name: {stage.name}",
+            f"    entrypoint: photoshape_flow.flows.stages.{stage.name.replace('-', '_')}",
+            f"    description: {json.dumps(stage.description)}",
+            "    tags: [photoshape, stage]",
+            "    parameters: {profile: default}",
+            *(["    concurrency_limit: *single"] if stage.exclusive else []),
+            "    work_pool: *pool",
+            "",
+        ]
+    return "\n".join([*lines, GENERATED_END]) + "\n"
+
+
+def write_stage_deployments(path: Path | None = None) -> bool:
+    """Rewrite the generated block of prefect.yaml; returns whether the file changed."""
+    path = path or prefect_yaml_path()
+    text = path.read_text()
+    start, end = text.index(GENERATED_BEGIN), text.index(GENERATED_END) + len(GENERATED_END) + 1
+    updated = text[:start] + stage_deployments_yaml() + text[end:]
+    if updated != text:
+        path.write_text(updated)
+    return updated != text
 
 
 def load_declarations(path: Path | None = None) -> list[dict[str, Any]]:

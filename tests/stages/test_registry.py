@@ -118,3 +118,14 @@ def test_cli_run_records_the_resolved_profile_and_reports(db_url: str) -> None:
         assert row.stages == ["ingest"] and row.reports["ingest"]["done"] == 0
         resolved = last_run_profile(session)
     assert resolved is not None and resolved.profile.training.epochs == 3
+
+
+def test_prefect_yaml_stage_deployments_are_the_generated_ones() -> None:
+    """Edit the registry, then `photoshape serve --write-yaml`; this fails until the file is regenerated."""
+    from photoshape_flow.flows.deployments import stage_deployments_yaml
+
+    assert stage_deployments_yaml() in (REPO_ROOT / "prefect.yaml").read_text()
+    declared = {d["name"]: d for d in yaml.safe_load((REPO_ROOT / "prefect.yaml").read_text())["deployments"]}
+    for stage in REGISTRY:
+        assert declared[stage.name]["description"] == stage.description
+        assert ("concurrency_limit" in declared[stage.name]) == stage.exclusive

@@ -11,6 +11,8 @@ def serve(
     names: list[str] = typer.Argument(None, help="Deployments to serve (default: all in prefect.yaml)."),
     limit: int | None = typer.Option(None, help="Maximum concurrent flow runs of this server process."),
     list_only: bool = typer.Option(False, "--list", help="Print the deployments and exit."),
+    write_yaml: bool = typer.Option(False, "--write-yaml", help="Rewrite prefect.yaml's stage deployments from "
+                                    "the stage registry and exit."),
 ) -> None:
     """Serve every deployment of prefect.yaml (schedules, the material-added trigger) until Ctrl-C.
 
@@ -18,9 +20,13 @@ def serve(
     PREFECT_SERVER_DATABASE_CONNECTION_URL=postgresql+asyncpg://..., and PREFECT_API_URL pointing at it.
     """
     from photoshape_flow.config import get_settings
-    from photoshape_flow.flows.deployments import build_deployments, load_declarations
+    from photoshape_flow.flows.deployments import build_deployments, load_declarations, write_stage_deployments
     from photoshape_flow.flows.deployments import serve as serve_deployments
 
+    if write_yaml:
+        changed = write_stage_deployments()
+        console.print("prefect.yaml: stage deployments " + ("rewritten" if changed else "already up to date"))
+        return
     if list_only:
         for spec in load_declarations():
             if not names or spec["name"] in names:

@@ -45,6 +45,7 @@ class Stage:
     finish: Callable[[StageContext, Any], StageReport] | None = None  # after every unit of a fan-out
     batch_size: int = 32  # items per unit of work in a fan-out
     claims_itself: bool = False  # the pipeline claims its items (finer than a batch)
+    exclusive: bool = False  # whole-stage work that must not run twice at once (one flow run at a time)
 
     @property
     def fans_out(self) -> bool:
@@ -81,6 +82,7 @@ REGISTRY: tuple[Stage, ...] = (
         "substances", "Bootstrap renders, the substance network, and a substance per aligned part.",
         substances.run, reads=("alignment", "material", "envmap", "shape"),
         writes=("rendering", "classifier", "part_substance"), progress=progress.substances_progress,
+        exclusive=True,
     ),
     Stage(
         "training-renders", "Randomized renders conditioned on part substances (section 5.1), resumable.",
@@ -90,6 +92,7 @@ REGISTRY: tuple[Stage, ...] = (
     Stage(
         "training", "Train (or resume, or fine-tune when materials were added) the material classifier.",
         training.run, reads=("rendering", "material"), writes=("classifier",), progress=progress.training_progress,
+        exclusive=True,
     ),
     Stage(
         "inference", "Ranked materials per part for the classifier and the baselines (section 6.1).",
