@@ -55,6 +55,9 @@ def seed(session: Session, suffix: str = "") -> dict[str, int]:
         m.Evaluation(run=f"run{suffix}", stage="inference", method="classifier", metric="material_top1", value=0.5),
         m.Grade(pair_id=pair.id, label="good"),
         m.WorkClaim(stage="fine-alignment", item_key=f"pair:{pair.id}", state="done"),
+        m.PipelineRun(origin="cli", profile_name="small", overrides={"training.epochs": "3"},
+                      profile={"name": "small", "training": {"epochs": 3}}, stages=["training"],
+                      reports={"training": {"done": 1}}, status="ok"),
     ])
     session.flush()
     return {"shape": shape.id, "pair": pair.id, "exemplar": exemplar.id, "classifier": classifier.id}
