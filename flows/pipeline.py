@@ -15,17 +15,34 @@ StageName = Literal[STAGE_NAMES]  # type: ignore[valid-type]
 
 
 @flow(name="photoshape-pipeline", task_runner=task_runner())
-def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName] | None = None) -> dict[str, Any]:
-    """Run the stages in canonical order; each resumes from what earlier runs recorded (incremental)."""
-    wanted = set(stages or STAGE_NAMES)
+def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName] | None = None,
+                        overrides: list[str] | None = None) -> dict[str, Any]:
+    """Run the stages in canonical order; each resumes from what earlier runs recorded (incremental).
+
+    The resolved profile and each stage's counts are recorded in `pipeline_run`, as `photoshape run` does.
+    """
+    from photoshape_flow.flows.tasks import flow_context
+
+    from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.stages import StageReport
+    from photoshape_flow.stages.run import finish_run, record_report, start_run
+
+    wanted = [name for name in STAGE_NAMES if name in set(stages or STAGE_NAMES)]
+    ctx = flow_context()
+    run_id = start_run(ctx, resolve_profile(profile, overrides or []), wanted, origin="flow")
     results: dict[str, Any] = {}
     times: dict[str, float] = {}
-    for name in STAGE_NAMES:
-        if name not in wanted:
-            continue
-        results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile)
-        get_run_logger().info("%s: %.1f s", name, times[name])
-    publish_summary("photoshape pipeline run", times, {"profile": profile})
+    try:
+        for name in wanted:
+            results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides)
+            counts = {k: int(results[name].get(k) or 0) for k in ("done", "skipped", "failed", "rejected")}
+            record_report(ctx, run_id, StageReport(name, seconds=times[name], **counts))
+            get_run_logger().info("%s: %.1f s", name, times[name])
+    except BaseException as exc:
+        finish_run(ctx, run_id, f"{type(exc).__name__}: {exc}")
+        raise
+    finish_run(ctx, run_id, None)
+    publish_summary("photoshape pipeline run", times, {"profile": profile, "overrides": overrides or []})
     return {"seconds": times, "results": results}
 
 

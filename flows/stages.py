@@ -69,13 +69,15 @@ def ingest(
     materials: list[str] | None = None,
     envmaps: list[str] | None = None,
     source: str | None = None,
+    overrides: list[str] | None = None,
 ) -> dict[str, Any]:
     """Ingest the four collections; without paths, everything in <data_root>/inbox/{envmaps,materials,...}."""
     from photoshape_flow.stages.ingest import IngestRequest
 
     given = {"shapes": shapes, "exemplars": exemplars, "materials": materials, "envmaps": envmaps}
     roots = {k: list(v) for k, v in given.items() if v} or None
-    return run_whole_stage(stage="ingest", profile=profile, work=IngestRequest(roots=roots, source=source))
+    return run_whole_stage(stage="ingest", profile=profile, overrides=overrides,
+                           work=IngestRequest(roots=roots, source=source))
 
 
 STAGE_FLOWS: dict[str, Flow] = {s.name: ingest if s.name == "ingest" else _stage_flow(s) for s in REGISTRY}

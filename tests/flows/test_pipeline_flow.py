@@ -87,6 +87,10 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
     # the substance confidence's part-level temperature, fit on the network's validation renders
     assert network.metrics["part_temperature_parts"] >= 0 and "part_temperature" in network.metrics
     assert (data_root / "gallery" / "index.html").is_file()
+    with session_scope() as session:  # the flow records its run as `photoshape run` does
+        run = session.execute(sa.select(m.PipelineRun).where(m.PipelineRun.origin == "flow")).scalar_one()
+        assert (run.profile_name, run.status, run.stages) == ("tiny", "ok", list(result["seconds"]))
+        assert run.reports["fine-alignment"]["done"] > 0 and run.profile["publish"]["max_rank"] == 1
 
     # the material-added re-run: found in the database, fine-tuned, re-inferred, old rows kept
     assert rerun["new_materials"] == new_ids
