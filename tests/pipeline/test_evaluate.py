@@ -565,7 +565,8 @@ def test_run_evaluation_passes_shape_recall_and_part_label_accuracy_through(
     seat and back can be right): CRF map right on 8 seat + 8 back pixels -> 16/43; the flow map only
     on the seat row -> 8/43; an empty coarse map -> 0.
     """
-    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig, ensure_viewpoint_set
+    from photoshape_flow.pipeline.coarse.viewpoint_sets import ensure_viewpoint_set
+    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig
 
     photos = {"photo": TRUTH, "photo2": ALL_SEAT, "photo3": ALL_SEAT}
     made = build_scene(db_url, store, tmp_path / "demo", photos, {"photo": PART_MAP},
