@@ -106,6 +106,8 @@ def test_cli_run_records_the_resolved_profile_and_reports(db_url: str) -> None:
     from photoshape_flow.stages import last_run_profile
 
     runner = CliRunner()
+    shown = runner.invoke(app, ["run", "training", "-p", "medium", "--set", "training.epochs=20", "--show-profile"])
+    assert shown.exit_code == 0 and "training.epochs = 20" in shown.output and "publish." not in shown.output
     bad = runner.invoke(app, ["run", "ingest", "--profile", "tiny", "--set", "training.epoch=3"])
     assert bad.exit_code == 1 and "no field 'epoch'" in bad.output
     result = runner.invoke(app, ["run", "ingest", "--profile", "tiny", "--set", "training.epochs=3"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import typer
 from rich.table import Table
@@ -23,11 +24,24 @@ def print_reports(reports: Sequence[StageReport], title: str = "stages run") -> 
     console.print(table)
 
 
+def profile_fields(data: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    """(dotted path, value) of every leaf of a profile's JSON: the names `--set` accepts."""
+    out: list[tuple[str, Any]] = []
+    for key, value in data.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out += profile_fields(value, f"{path}.")
+        elif path != "name":
+            out.append((path, ",".join(map(str, value)) if isinstance(value, list) else value))
+    return out
+
+
 def run(
     stage: str = typer.Argument(..., help=f"One of: {', '.join(STAGE_NAMES)}, or 'all'."),
     profile: str = typer.Option("default", "--profile", "-p", help=" | ".join(PROFILES)),
     overrides: list[str] = typer.Option(None, "--set", help="Override a profile field, e.g. training.epochs=3 "
-                                        "(repeatable; see docs/architecture.md for the fields)."),
+                                        "(repeatable; --show-profile lists the fields)."),
+    show_profile: bool = typer.Option(False, "--show-profile", help="Print the resolved profile's fields and exit."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
@@ -38,6 +52,11 @@ def run(
     if stage != "all" and stage not in STAGE_NAMES:
         fail(f"unknown stage {stage!r}; choose from {', '.join(STAGE_NAMES)} or all")
     resolved = resolve_profile_or_fail(profile, overrides)
+    if show_profile:
+        for path, value in profile_fields(resolved.profile.to_dict()):
+            if stage == "all" or path.split(".")[0] == stage.replace("-", "_"):
+                console.print(f"{path} = {value}", highlight=False)
+        return
     require_database()
     reports = run_all(resolved, stage_context(), names=None if stage == "all" else [stage],
                       on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
