@@ -9,14 +9,20 @@ a one-line error, a summary line and a log line, and the batch goes on.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import logging
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sqlalchemy.orm import Session
+
 from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db.base import Base
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.db.upsert import upsert
 from photoshape_flow.geometry.archive import ArchiveLimits
 from photoshape_flow.store import BlobStore
 
@@ -67,6 +73,47 @@ class IngestSummary:
             "duplicates": [list(d) for d in self.duplicates],
             "warnings": [list(w) for w in self.warnings],
         }
+
+
+@dataclass(frozen=True)
+class FailureWriter:
+    """How one collection's table records a rejected or failed item; call it like a function.
+
+    The four ingest stages record failures alike (count it, skip the write when the row already says
+    the same, upsert the row with its content columns cleared); only the table, its natural key, the
+    columns to clear, the columns that must not stay empty and the dependents to drop differ.
+    """
+
+    model: type[Base]
+    key: tuple[str, ...]
+    cleared: Mapping[str, Any]
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    drop_dependents: Callable[[Session, int], None] | None = None
+
+    def __call__(
+        self, url: str, summary: IngestSummary, label: str, row: Mapping[str, Any], status: str, reason: str,
+        existing: Mapping[str, Any] | None,
+    ) -> None:
+        summary.reject(label, reason)
+        if _failure_unchanged(existing, row, status, reason):
+            return  # same outcome as last time: nothing to change
+        values = {**row, "status": status, "error": reason, **copy.deepcopy(dict(self.cleared))}
+        for column, default in self.defaults.items():
+            values.setdefault(column, copy.deepcopy(default))
+        with session_scope(url) as session:
+            row_id = upsert(session, self.model, values, key=list(self.key))[0]
+            if existing is not None and self.drop_dependents is not None:
+                self.drop_dependents(session, row_id)
+
+
+def _failure_unchanged(
+    existing: Mapping[str, Any] | None, row: Mapping[str, Any], status: str, reason: str,
+) -> bool:
+    """True when the stored row already records this outcome for the same content (no write needed)."""
+    return (
+        existing is not None and existing["status"] == status and existing["error"] == reason
+        and existing["sha256"] == row.get("sha256")
+    )
 
 
 @dataclass(frozen=True)
