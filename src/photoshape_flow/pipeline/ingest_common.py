@@ -25,6 +25,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.geometry.archive import ArchiveLimits
 from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import STATUS_OK
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +59,17 @@ class IngestSummary:
     def reject(self, label: str, reason: str) -> None:
         self.rejected.append((label, reason))
         logger.warning("%s: %s", label, reason)
+
+    def count_written(self, label: str, row_id: int, existing: Mapping[str, Any] | None, noun: str) -> None:
+        """Count a freshly written `ok` row: "replaced" when it overwrote an `ok` row, else "added".
+
+        A row that was rejected or failed before counts as added: only good content is replaced.
+        """
+        if existing is not None and existing["status"] == STATUS_OK:
+            self.replaced.append(row_id)
+            logger.info("%s: replaced %s %d (new content)", label, noun, row_id)
+        else:
+            self.added.append(row_id)
 
     def warn(self, label: str, message: str) -> None:
         self.warnings.append((label, message))

@@ -147,11 +147,7 @@ def _ingest_file(
     }
     with session_scope(url) as session:
         envmap_id = upsert(session, m.Envmap, values, key=["name"])[0]
-    if existing is not None and existing["status"] == STATUS_OK:
-        summary.replaced.append(envmap_id)
-        logger.info("%s: replaced envmap %d (new content)", label, envmap_id)
-    else:
-        summary.added.append(envmap_id)
+    summary.count_written(label, envmap_id, existing, "envmap")
 
 
 def ingest_envmaps(

@@ -234,11 +234,7 @@ def _ingest_folder(
     }
     with session_scope(url) as session:
         material_id = upsert(session, m.Material, values, key=["name"])[0]
-    if existing is not None and existing["status"] == STATUS_OK:
-        summary.replaced.append(material_id)
-        logger.info("%s: replaced material %d (new content)", label, material_id)
-    else:
-        summary.added.append(material_id)
+    summary.count_written(label, material_id, existing, "material")
 
 
 def materials_without_preview(url: str) -> list[int]:

@@ -193,11 +193,7 @@ def _ingest_item(
         if existing is not None:
             delete_shape_dependents(session, shape_id)
         session.execute(sa.insert(m.Part), _part_rows(shape_id, prepared))
-    if existing is not None and existing["status"] == STATUS_OK:
-        summary.replaced.append(shape_id)
-        logger.info("%s: replaced shape %d (new content)", label, shape_id)
-    else:
-        summary.added.append(shape_id)
+    summary.count_written(label, shape_id, existing, "shape")
 
 
 def ingest_shapes(
