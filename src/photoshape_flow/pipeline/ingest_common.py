@@ -1,4 +1,4 @@
-"""Shared pieces of the four ingest stages: the summary, limits, hashing, splits, the material event.
+"""Shared pieces of the four ingest stages: the summary, failure rows, limits, hashing, splits, the material event.
 
 Every ingest stage follows one pattern per item: compute the content hash of the source files,
 skip the item when a row with the same natural key, hash and parameters is already `ok`
