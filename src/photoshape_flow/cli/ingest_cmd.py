@@ -22,6 +22,9 @@ from photoshape_flow.cli.common import console, err_console, fail, require_datab
 ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps.", no_args_is_help=True)
 
 PathsArg = typer.Argument(..., help="Files or folders (searched recursively).", show_default=False)
+AttributionOpt = typer.Option(None, help="Attribution to record.")
+StrictOpt = typer.Option(False, help="Exit with code 2 when anything was rejected.")
+VerboseOpt = typer.Option(False, "--verbose", "-v", help="Log each item.")
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -35,6 +38,14 @@ def _setup_logging(verbose: bool) -> None:
     elif not logging.getLogger().handlers and not package.handlers:
         # the summary prints every rejection; keep logging's last-resort handler from repeating them
         package.addHandler(logging.NullHandler())
+
+
+def _start(verbose: bool, split: str | None = None) -> None:
+    """What every ingest verb checks before its stage runs, so each refuses bad input the same way."""
+    _setup_logging(verbose)
+    require_database()
+    if split not in (None, "train", "val"):
+        fail(f"--split must be train or val, not {split!r}")
 
 
 @contextmanager
@@ -83,21 +94,18 @@ def shapes(
     name_filter: str | None = typer.Option(None, "--name-filter", help="Regular expression on names/ids/tags."),
     split: str | None = typer.Option(None, help="Force 'train' or 'val' (default: hash-based 90/10)."),
     license: str | None = typer.Option(None, "--license", help="Licence to record (catalogs bring their own)."),
-    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    attribution: str | None = AttributionOpt,
     max_faces: int = typer.Option(500_000, help="Reject shapes with more triangles."),
     max_file_mb: float = typer.Option(100.0, help="Reject model files larger than this (MiB)."),
     timeout: float = typer.Option(600.0, help="Seconds per shape before the importer is killed."),
     isolate: bool = typer.Option(True, help="Parse in a child process (a crashing importer costs one item)."),
-    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+    strict: bool = StrictOpt,
+    verbose: bool = VerboseOpt,
 ) -> None:
     """OBJ+MTL, glTF/GLB, ShapeNetCore v2 trees and Sweet Home 3D catalogs (.sh3f)."""
     from photoshape_flow.pipeline.ingest import IngestLimits, ingest_shapes
 
-    _setup_logging(verbose)
-    require_database()
-    if split not in (None, "train", "val"):
-        fail(f"--split must be train or val, not {split!r}")
+    _start(verbose, split)
     limits = IngestLimits(max_faces=max_faces, max_shape_bytes=int(max_file_mb * 1024 * 1024), timeout_s=timeout)
     try:
         with _progress("shapes") as progress:
@@ -116,17 +124,16 @@ def exemplars(
     category: str | None = typer.Option(None, help="Category to record (e.g. chair)."),
     size: int = typer.Option(512, help="Side of the stored square crop (paper: 1000; never upscaled)."),
     license: str | None = typer.Option(None, "--license", help="Licence to record."),
-    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    attribution: str | None = AttributionOpt,
     source_url: str | None = typer.Option(None, help="Where the photos came from."),
     max_megapixels: float = typer.Option(64.0, help="Reject images with more pixels (decompression bombs)."),
-    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+    strict: bool = StrictOpt,
+    verbose: bool = VerboseOpt,
 ) -> None:
     """Product photos on white (JPEG/PNG/WebP): mask, square crop, resize, dedupe."""
     from photoshape_flow.pipeline.ingest import IngestLimits, ingest_exemplars
 
-    _setup_logging(verbose)
-    require_database()
+    _start(verbose)
     if size < 16:
         fail("--size must be at least 16")
     limits = IngestLimits(max_image_pixels=int(max_megapixels * 1_000_000))
@@ -142,18 +149,17 @@ def materials(
     substance: str | None = typer.Option(None, help="Substance when neither sidecar nor folder name says."),
     source: str | None = typer.Option(None, help="Source name to record (sidecars take precedence)."),
     license: str | None = typer.Option(None, "--license", help="Licence to record (sidecars take precedence)."),
-    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    attribution: str | None = AttributionOpt,
     previews: bool = typer.Option(True, help="Render sphere previews when the renderer is available."),
-    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+    strict: bool = StrictOpt,
+    verbose: bool = VerboseOpt,
 ) -> None:
     """SVBRDF folders (maps recognised by name + material.json/.toml) and analytic materials."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.flows.events import PrefectEvents
     from photoshape_flow.pipeline.ingest import ingest_materials
 
-    _setup_logging(verbose)
-    require_database()
+    _start(verbose)
     with _progress("materials") as progress:
         summary = ingest_materials(paths, substance=substance, source=source, license=license,
                                    attribution=attribution, previews=previews, progress=progress,
@@ -166,18 +172,15 @@ def envmaps(
     paths: list[Path] = PathsArg,
     split: str | None = typer.Option(None, help="Force 'train' or 'val' (default: hash-based, ~10% val)."),
     license: str | None = typer.Option(None, "--license", help="Licence to record."),
-    attribution: str | None = typer.Option(None, help="Attribution to record."),
+    attribution: str | None = AttributionOpt,
     source_url: str | None = typer.Option(None, help="Where the maps came from."),
-    strict: bool = typer.Option(False, help="Exit with code 2 when anything was rejected."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each item."),
+    strict: bool = StrictOpt,
+    verbose: bool = VerboseOpt,
 ) -> None:
     """Equirectangular HDR environment maps (.hdr, .exr)."""
     from photoshape_flow.pipeline.ingest import ingest_envmaps
 
-    _setup_logging(verbose)
-    require_database()
-    if split not in (None, "train", "val"):
-        fail(f"--split must be train or val, not {split!r}")
+    _start(verbose, split)
     with _progress("envmaps") as progress:
         summary = ingest_envmaps(paths, split=split, license=license, attribution=attribution,
                                  source_url=source_url, progress=progress)

@@ -58,43 +58,50 @@ def kelvin_to_rgb(kelvin: float) -> np.ndarray:
     return lin / max(lum, 1e-6)
 
 
+Range = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class BoxRanges:
+    """Where one soft box's size, brightness and colour are drawn from (its azimuth is placed apart)."""
+
+    elevation: Range
+    width: Range
+    height: Range
+    intensity: Range
+    kelvin_offset: Range | None  # None: exactly the studio's base temperature
+
+
+KEY_BOX = BoxRanges((0.25, 0.7), (0.25, 0.45), (0.3, 0.5), (6, 10), (-300, 300))
+FILL_BOX = BoxRanges((0.1, 0.4), (0.3, 0.5), (0.3, 0.5), (2, 4), (-600, 600))
+RIM_BOX = BoxRanges((0.2, 0.6), (0.1, 0.2), (0.3, 0.6), (3, 8), (-500, 1500))
+TOP_BOX = BoxRanges((1.2, 1.45), (0.3, 0.5), (0.3, 0.5), (2, 5), None)
+
+
+def sample_box(rng: np.random.Generator, azimuth: float, ranges: BoxRanges, base_k: float) -> SoftBox:
+    """One soft box drawn from `ranges`, field by field: seeded studios depend on this draw order."""
+    return SoftBox(
+        azimuth,
+        float(rng.uniform(*ranges.elevation)),
+        float(rng.uniform(*ranges.width)),
+        float(rng.uniform(*ranges.height)),
+        float(rng.uniform(*ranges.intensity)),
+        base_k if ranges.kelvin_offset is None else base_k + float(rng.uniform(*ranges.kelvin_offset)),
+    )
+
+
 def sample_studio(rng: np.random.Generator, name: str) -> StudioSpec:
-    """A random product-photo lighting set-up: key + fill + rim + top, warm to cool."""
+    """A random product-photo lighting set-up: key + fill + rim + top, warm to cool.
+
+    Each box's azimuth is drawn just before its other fields (argument order): seeded studios depend on it.
+    """
     base_k = float(rng.uniform(3800, 7500))
     key_az = float(rng.uniform(-0.9, 0.9))
     boxes = [
-        SoftBox(
-            key_az,
-            float(rng.uniform(0.25, 0.7)),
-            float(rng.uniform(0.25, 0.45)),
-            float(rng.uniform(0.3, 0.5)),
-            float(rng.uniform(6, 10)),
-            base_k + float(rng.uniform(-300, 300)),
-        ),
-        SoftBox(
-            key_az + np.sign(-key_az or 1.0) * float(rng.uniform(1.2, 1.9)),
-            float(rng.uniform(0.1, 0.4)),
-            float(rng.uniform(0.3, 0.5)),
-            float(rng.uniform(0.3, 0.5)),
-            float(rng.uniform(2, 4)),
-            base_k + float(rng.uniform(-600, 600)),
-        ),
-        SoftBox(
-            float(np.pi + rng.uniform(-0.6, 0.6)),
-            float(rng.uniform(0.2, 0.6)),
-            float(rng.uniform(0.1, 0.2)),
-            float(rng.uniform(0.3, 0.6)),
-            float(rng.uniform(3, 8)),
-            base_k + float(rng.uniform(-500, 1500)),
-        ),
-        SoftBox(
-            float(rng.uniform(-np.pi, np.pi)),
-            float(rng.uniform(1.2, 1.45)),
-            float(rng.uniform(0.3, 0.5)),
-            float(rng.uniform(0.3, 0.5)),
-            float(rng.uniform(2, 5)),
-            base_k,
-        ),
+        sample_box(rng, key_az, KEY_BOX, base_k),
+        sample_box(rng, key_az + np.sign(-key_az or 1.0) * float(rng.uniform(1.2, 1.9)), FILL_BOX, base_k),
+        sample_box(rng, float(np.pi + rng.uniform(-0.6, 0.6)), RIM_BOX, base_k),
+        sample_box(rng, float(rng.uniform(-np.pi, np.pi)), TOP_BOX, base_k),
     ]
     return StudioSpec(
         name=name,

@@ -106,6 +106,33 @@ def _uv_area(corner_uvs: np.ndarray) -> float:
     return float(0.5 * np.abs(cross).sum())
 
 
+UvMesh = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""(position index per vertex, vertex positions, vertex uvs, faces) of a part with one uv per vertex."""
+
+
+def _weld_corners(v: np.ndarray, f: np.ndarray, corner_uvs: np.ndarray) -> UvMesh:
+    """One vertex per unique (position, uv) corner: a uv seam splits a position, nothing else does."""
+    key = np.concatenate([f.reshape(-1, 1).astype(np.float64), corner_uvs.reshape(-1, 2)], axis=1)
+    uniq, inverse = np.unique(key, axis=0, return_inverse=True)
+    pos_id = uniq[:, 0].astype(np.int64)
+    return pos_id, v[pos_id], uniq[:, 1:3], inverse.reshape(-1, 3)
+
+
+def _xatlas_unwrap(v: np.ndarray, f: np.ndarray, options: PreprocessOptions) -> UvMesh:
+    """A fresh chart atlas from xatlas (imported here: only parts without usable source uvs need it)."""
+    import xatlas
+
+    chart_options = xatlas.ChartOptions()
+    chart_options.max_iterations = options.xatlas_iterations
+    chart_options.max_chart_area = options.xatlas_max_chart_area
+    atlas = xatlas.Atlas()
+    atlas.add_mesh(v.astype(np.float32), f.astype(np.uint32))
+    atlas.generate(chart_options, xatlas.PackOptions())
+    vmapping, indices, atlas_uvs = atlas.get_mesh(0)
+    pos_id = np.asarray(vmapping, np.int64)
+    return pos_id, v[pos_id], np.asarray(atlas_uvs, np.float64), np.asarray(indices, np.int64).reshape(-1, 3)
+
+
 def _finish_part(
     index: int, clean: _Clean, options: PreprocessOptions, warnings: list[str]
 ) -> PartMesh:
@@ -117,36 +144,12 @@ def _finish_part(
         warnings.append(f"part {clean.raw.name!r}: source UVs are degenerate; regenerated")
         corner_uv = None
     if corner_uv is not None:
-        # vertices = unique (position, uv) corners
-        key = np.concatenate([f.reshape(-1, 1).astype(np.float64), corner_uv.reshape(-1, 2)], axis=1)
-        uniq, inverse = np.unique(key, axis=0, return_inverse=True)
-        pos_id = uniq[:, 0].astype(np.int64)
-        verts = v[pos_id]
-        uvs = uniq[:, 1:3]
-        faces = inverse.reshape(-1, 3)
+        pos_id, verts, uvs, faces = _weld_corners(v, f, corner_uv)
     elif len(f) <= options.xatlas_max_faces:
-        import xatlas
-
-        chart_options = xatlas.ChartOptions()
-        chart_options.max_iterations = options.xatlas_iterations
-        chart_options.max_chart_area = options.xatlas_max_chart_area
-        atlas = xatlas.Atlas()
-        atlas.add_mesh(v.astype(np.float32), f.astype(np.uint32))
-        atlas.generate(chart_options, xatlas.PackOptions())
-        vmapping, indices, atlas_uvs = atlas.get_mesh(0)
-        pos_id = np.asarray(vmapping, np.int64)
-        verts = v[pos_id]
-        uvs = np.asarray(atlas_uvs, np.float64)
-        faces = np.asarray(indices, np.int64).reshape(-1, 3)
+        pos_id, verts, uvs, faces = _xatlas_unwrap(v, f, options)
         uv_source = "xatlas"
     else:
-        corner = _box_uvs(v, f)
-        key = np.concatenate([f.reshape(-1, 1).astype(np.float64), corner.reshape(-1, 2)], axis=1)
-        uniq, inverse = np.unique(key, axis=0, return_inverse=True)
-        pos_id = uniq[:, 0].astype(np.int64)
-        verts = v[pos_id]
-        uvs = uniq[:, 1:3]
-        faces = inverse.reshape(-1, 3)
+        pos_id, verts, uvs, faces = _weld_corners(v, f, _box_uvs(v, f))
         uv_source = "box"
     normals = corner_normals(verts, faces, pos_id, options.crease_angle_deg)
     src, new_faces, vertex_normals = split_vertices(faces, normals)

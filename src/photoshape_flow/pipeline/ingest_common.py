@@ -1,4 +1,4 @@
-"""Shared pieces of the four ingest stages: the summary, limits, hashing, splits, the material event.
+"""Shared pieces of the four ingest stages: the summary, failure rows, limits, hashing, splits, the material event.
 
 Every ingest stage follows one pattern per item: compute the content hash of the source files,
 skip the item when a row with the same natural key, hash and parameters is already `ok`
@@ -9,16 +9,23 @@ a one-line error, a summary line and a log line, and the batch goes on.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import logging
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sqlalchemy.orm import Session
+
 from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db.base import Base
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.db.upsert import upsert
 from photoshape_flow.geometry.archive import ArchiveLimits
 from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import STATUS_OK
 
 logger = logging.getLogger(__name__)
 
@@ -53,6 +60,17 @@ class IngestSummary:
         self.rejected.append((label, reason))
         logger.warning("%s: %s", label, reason)
 
+    def count_written(self, label: str, row_id: int, existing: Mapping[str, Any] | None, noun: str) -> None:
+        """Count a freshly written `ok` row: "replaced" when it overwrote an `ok` row, else "added".
+
+        A row that was rejected or failed before counts as added: only good content is replaced.
+        """
+        if existing is not None and existing["status"] == STATUS_OK:
+            self.replaced.append(row_id)
+            logger.info("%s: replaced %s %d (new content)", label, noun, row_id)
+        else:
+            self.added.append(row_id)
+
     def warn(self, label: str, message: str) -> None:
         self.warnings.append((label, message))
         logger.info("%s: %s", label, message)
@@ -67,6 +85,47 @@ class IngestSummary:
             "duplicates": [list(d) for d in self.duplicates],
             "warnings": [list(w) for w in self.warnings],
         }
+
+
+@dataclass(frozen=True)
+class FailureWriter:
+    """How one collection's table records a rejected or failed item; call it like a function.
+
+    The four ingest stages record failures alike (count it, skip the write when the row already says
+    the same, upsert the row with its content columns cleared); only the table, its natural key, the
+    columns to clear, the columns that must not stay empty and the dependents to drop differ.
+    """
+
+    model: type[Base]
+    key: tuple[str, ...]
+    cleared: Mapping[str, Any]
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    drop_dependents: Callable[[Session, int], None] | None = None
+
+    def __call__(
+        self, url: str, summary: IngestSummary, label: str, row: Mapping[str, Any], status: str, reason: str,
+        existing: Mapping[str, Any] | None,
+    ) -> None:
+        summary.reject(label, reason)
+        if _failure_unchanged(existing, row, status, reason):
+            return  # same outcome as last time: nothing to change
+        values = {**row, "status": status, "error": reason, **copy.deepcopy(dict(self.cleared))}
+        for column, default in self.defaults.items():
+            values.setdefault(column, copy.deepcopy(default))
+        with session_scope(url) as session:
+            row_id = upsert(session, self.model, values, key=list(self.key))[0]
+            if existing is not None and self.drop_dependents is not None:
+                self.drop_dependents(session, row_id)
+
+
+def _failure_unchanged(
+    existing: Mapping[str, Any] | None, row: Mapping[str, Any], status: str, reason: str,
+) -> bool:
+    """True when the stored row already records this outcome for the same content (no write needed)."""
+    return (
+        existing is not None and existing["status"] == status and existing["error"] == reason
+        and existing["sha256"] == row.get("sha256")
+    )
 
 
 @dataclass(frozen=True)

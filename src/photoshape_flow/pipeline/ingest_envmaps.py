@@ -25,6 +25,7 @@ from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError,
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.hdr import HDR_SUFFIXES, BadEnvmapError, EnvmapLimits, validate_envmap
 from photoshape_flow.pipeline.ingest_common import (
+    FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
@@ -84,18 +85,10 @@ def balance_envmap_splits(url: str) -> list[tuple[str, str]]:
     return moves
 
 
-def _record_failure(
-    url: str, summary: IngestSummary, label: str, row: dict[str, Any], status: str, reason: str,
-    existing: dict[str, Any] | None,
-) -> None:
-    summary.reject(label, reason)
-    if existing is not None and existing["status"] == status and existing["error"] == reason \
-            and existing["sha256"] == row.get("sha256"):
-        return
-    values = {**row, "status": status, "error": reason, "blob": None, "enabled": False}
-    values.setdefault("meta", {})
-    with session_scope(url) as session:
-        upsert(session, m.Envmap, values, key=["name"])
+_record_failure = FailureWriter(
+    m.Envmap, key=("name",), cleared={"blob": None, "enabled": False}, defaults={"meta": {}},
+)
+"""Record a rejected/failed envmap row (no blob, disabled) and note it in the summary."""
 
 
 def _ingest_file(
@@ -154,11 +147,7 @@ def _ingest_file(
     }
     with session_scope(url) as session:
         envmap_id = upsert(session, m.Envmap, values, key=["name"])[0]
-    if existing is not None and existing["status"] == STATUS_OK:
-        summary.replaced.append(envmap_id)
-        logger.info("%s: replaced envmap %d (new content)", label, envmap_id)
-    else:
-        summary.added.append(envmap_id)
+    summary.count_written(label, envmap_id, existing, "envmap")
 
 
 def ingest_envmaps(

@@ -30,6 +30,7 @@ from photoshape_flow.imaging.dedupe import DEFAULT_RADIUS, DESCRIPTOR, assign_du
 from photoshape_flow.imaging.exemplar import ExemplarOptions, prepare_exemplar
 from photoshape_flow.imaging.io import BadImageError, read_image
 from photoshape_flow.pipeline.ingest_common import (
+    FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
@@ -106,22 +107,13 @@ def _load_index(url: str, store: BlobStore, skip_ids: set[int]) -> tuple[np.ndar
     return np.stack(feats), ids
 
 
-def _record_failure(
-    url: str, summary: IngestSummary, label: str, row: dict[str, Any], status: str, reason: str,
-    existing: dict[str, Any] | None,
-) -> None:
-    summary.reject(label, reason)
-    if existing is not None and existing["status"] == status and existing["error"] == reason \
-            and existing["sha256"] == row.get("sha256"):
-        return
-    values = {**row, "status": status, "error": reason, "image_blob": None, "mask_blob": None, "size": None,
-              "foreground_fraction": None, "duplicate_of_id": None}
-    values.setdefault("meta", {})
-    values.setdefault("params_hash", "")
-    with session_scope(url) as session:
-        exemplar_id = upsert(session, m.Exemplar, values, key=["source", "source_id"])[0]
-        if existing is not None:
-            delete_exemplar_dependents(session, exemplar_id)
+_record_failure = FailureWriter(
+    m.Exemplar, key=("source", "source_id"),
+    cleared={"image_blob": None, "mask_blob": None, "size": None, "foreground_fraction": None,
+             "duplicate_of_id": None},
+    defaults={"meta": {}, "params_hash": ""}, drop_dependents=delete_exemplar_dependents,
+)
+"""Record a rejected/failed exemplar row (no image, no features) and note it in the summary."""
 
 
 def _write(url: str, ready: _Ready, duplicate_of: int | None, distance: float | None) -> int:

@@ -36,6 +36,7 @@ from photoshape_flow.imaging.svbrdf import (
     scan_material,
 )
 from photoshape_flow.pipeline.ingest_common import (
+    FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
@@ -90,21 +91,11 @@ def _existing(url: str, name: str) -> dict[str, Any] | None:
     return dict(row._mapping) if row is not None else None
 
 
-def _record_failure(
-    url: str, summary: IngestSummary, label: str, row: dict[str, Any], status: str, reason: str,
-    existing: dict[str, Any] | None,
-) -> None:
-    summary.reject(label, reason)
-    if existing is not None and existing["status"] == status and existing["error"] == reason \
-            and existing["sha256"] == row.get("sha256"):
-        return
-    values = {**row, "status": status, "error": reason, "maps": {}, "preview_blob": None, "enabled": False}
-    values.setdefault("substance", "unknown")
-    values.setdefault("meta", {})
-    values.setdefault("params", {})
-    values.setdefault("params_hash", "")
-    with session_scope(url) as session:
-        upsert(session, m.Material, values, key=["name"])
+_record_failure = FailureWriter(
+    m.Material, key=("name",), cleared={"maps": {}, "preview_blob": None, "enabled": False},
+    defaults={"substance": "unknown", "meta": {}, "params": {}, "params_hash": ""},
+)
+"""Record a rejected/failed material row (no maps, disabled) and note it in the summary."""
 
 
 def _store_map(store, channel: str, array: np.ndarray) -> str:  # type: ignore[no-untyped-def]
@@ -243,11 +234,7 @@ def _ingest_folder(
     }
     with session_scope(url) as session:
         material_id = upsert(session, m.Material, values, key=["name"])[0]
-    if existing is not None and existing["status"] == STATUS_OK:
-        summary.replaced.append(material_id)
-        logger.info("%s: replaced material %d (new content)", label, material_id)
-    else:
-        summary.added.append(material_id)
+    summary.count_written(label, material_id, existing, "material")
 
 
 def materials_without_preview(url: str) -> list[int]:

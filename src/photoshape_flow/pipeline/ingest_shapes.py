@@ -33,6 +33,7 @@ from photoshape_flow.geometry.raw import BadShapeError
 from photoshape_flow.geometry.sources import RejectedInput, ShapeItem, discover_shapes, materialize
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.ingest_common import (
+    FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
@@ -88,25 +89,12 @@ def _base_row(item: ShapeItem, split: str) -> dict[str, Any]:
     }
 
 
-def _record_failure(
-    url: str, summary: IngestSummary, label: str, row: dict[str, Any], status: str, reason: str,
-    existing: dict[str, Any] | None,
-) -> None:
-    """Upsert a rejected/failed shape row (no mesh, no parts) and note it in the summary."""
-    summary.reject(label, reason)
-    if (
-        existing is not None and existing["status"] == status and existing["error"] == reason
-        and existing["sha256"] == row.get("sha256")
-    ):
-        return  # same outcome as last time: nothing to change
-    values = {**row, "status": status, "error": reason, "mesh_blob": None, "num_vertices": None,
-              "num_faces": None, "num_parts": None}
-    values.setdefault("meta", {})
-    values.setdefault("params_hash", "")
-    with session_scope(url) as session:
-        shape_id = upsert(session, m.Shape, values, key=["source", "source_id"])[0]
-        if existing is not None:
-            delete_shape_dependents(session, shape_id)
+_record_failure = FailureWriter(
+    m.Shape, key=("source", "source_id"),
+    cleared={"mesh_blob": None, "num_vertices": None, "num_faces": None, "num_parts": None},
+    defaults={"meta": {}, "params_hash": ""}, drop_dependents=delete_shape_dependents,
+)
+"""Record a rejected/failed shape row (no mesh, no parts) and note it in the summary."""
 
 
 def _store_prepared(store: BlobStore, prepared: PreparedShape) -> str:
@@ -205,11 +193,7 @@ def _ingest_item(
         if existing is not None:
             delete_shape_dependents(session, shape_id)
         session.execute(sa.insert(m.Part), _part_rows(shape_id, prepared))
-    if existing is not None and existing["status"] == STATUS_OK:
-        summary.replaced.append(shape_id)
-        logger.info("%s: replaced shape %d (new content)", label, shape_id)
-    else:
-        summary.added.append(shape_id)
+    summary.count_written(label, shape_id, existing, "shape")
 
 
 def ingest_shapes(
