@@ -73,6 +73,12 @@ def test_installed_wheel_carries_flows_migrations_and_prefect_yaml(tmp_path: Pat
     assert yaml.safe_load((site / "photoshape_flow/flows/prefect.yaml").read_text())["deployments"]
     assert list((site / "photoshape_flow/migrations/versions").glob("*.py"))
     # Import from the unpacked wheel, from a folder that is not the checkout.
+    # every package of the source tree must be in the wheel: the editable install of the test's own
+    # interpreter would otherwise fill in a missing subpackage from the checkout and hide it
+    packages = sorted({".".join(p.relative_to(REPO_ROOT / "src").parent.parts)
+                       for p in (REPO_ROOT / "src" / "photoshape_flow").rglob("__init__.py")})
+    missing = [name for name in packages if not (site / name.replace(".", "/") / "__init__.py").is_file()]
+    assert missing == [], f"packages missing from the wheel (pyproject.toml packages): {missing}"
     code = (
         "import photoshape_flow.flows.pipeline as p, photoshape_flow.db.migrate as mg;"
         "from photoshape_flow.flows.deployments import build_deployments;"
