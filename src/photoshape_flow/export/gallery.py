@@ -167,7 +167,7 @@ def write_gallery(
             "grade_rank": GRADE_ORDER.get(entry.grade or "", 99),
         })
     page = render("gallery_index.html", title=title, root="", rows=rows, grades=list(GRADE_ORDER))
-    (root / "index.html").write_text(page)
+    (root / "index.html").write_text(page, encoding="utf-8")
     _write_materials_page(root, materials, usage, assets)
     return root / "index.html"
 
@@ -182,7 +182,7 @@ def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets) -> None:
     ]
     page = render("gallery_pair.html", title=f"PhotoShape {entry.pair_id}: {entry.shape_name}", root="../",
                   e=entry, figures=figures, downloads=downloads)
-    (root / "pairs" / f"{entry.slug}.html").write_text(page)
+    (root / "pairs" / f"{entry.slug}.html").write_text(page, encoding="utf-8")
 
 
 def _write_materials_page(
@@ -190,4 +190,5 @@ def _write_materials_page(
 ) -> None:
     rows = [{"material": m, "preview": assets.image(m.preview), "used": usage.get(m.id, 0)}
             for m in sorted(materials, key=lambda m: (-usage.get(m.id, 0), m.name))]
-    (root / "materials.html").write_text(render("gallery_materials.html", title="Materials", root="", rows=rows))
+    (root / "materials.html").write_text(render("gallery_materials.html", title="Materials", root="", rows=rows),
+                                          encoding="utf-8")
