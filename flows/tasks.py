@@ -4,7 +4,8 @@ No task receives a session, an array or a live object, so every task is cacheabl
 runs unchanged in a Dask worker process. The task runner of the stage flows is chosen from the
 settings: batches run one after another in the flow's process by default (Mitsuba renders in one
 thread per process), or fan out to Dask worker processes (`PHOTOSHAPE_DASK_WORKERS` for a local
-cluster, `PHOTOSHAPE_DASK_ADDRESS` for an existing one).
+cluster, `PHOTOSHAPE_DASK_ADDRESS` for an existing one). A local cluster's dashboard binds
+`PHOTOSHAPE_DASK_DASHBOARD_ADDRESS`, 127.0.0.1:8787 unless configured.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import Any
 from prefect import get_run_logger, task
 from prefect.task_runners import ThreadPoolTaskRunner
 
-from photoshape_flow.config import get_settings
+from photoshape_flow.config import Settings, get_settings
 
 
 def task_runner() -> Any:
@@ -26,10 +27,16 @@ def task_runner() -> Any:
 
         if settings.dask_address:
             return DaskTaskRunner(address=settings.dask_address)
-        return DaskTaskRunner(
-            cluster_kwargs={"n_workers": settings.dask_workers, "threads_per_worker": 1, "processes": True}
-        )
+        return DaskTaskRunner(cluster_kwargs=local_cluster_kwargs(settings))
     return ThreadPoolTaskRunner(max_workers=1)
+
+
+def local_cluster_kwargs(settings: Settings) -> dict[str, Any]:
+    """The distributed `LocalCluster` arguments: single-threaded worker processes, and the dashboard
+    on `settings.dask_dashboard_address` (127.0.0.1 by default, where LocalCluster's own default
+    ":8787" would serve task arguments and worker logs on every interface)."""
+    return {"n_workers": settings.dask_workers, "threads_per_worker": 1, "processes": True,
+            "dashboard_address": settings.dask_dashboard_address}
 
 
 def _logger() -> logging.Logger | logging.LoggerAdapter:

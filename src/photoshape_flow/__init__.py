@@ -6,3 +6,9 @@ and Prefect flows around them.
 """
 
 __version__ = "0.1.0"
+
+# Every process that runs this package (CLI, Prefect worker, Dask worker) masks database passwords
+# in every log record before any handler, Prefect's API log handler included, sees it.
+from photoshape_flow.masking import install_password_masking
+
+install_password_masking()

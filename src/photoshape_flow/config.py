@@ -61,6 +61,12 @@ class Settings(BaseSettings):
         description="Start a local Dask cluster with this many single-threaded worker processes for the flows' "
         "fan-out (0: batches run one after another in the flow's process).",
     )
+    dask_dashboard_address: str | None = Field(
+        default="127.0.0.1:8787",
+        description="host:port of the local Dask cluster's dashboard and HTTP endpoints; empty: no dashboard "
+        "(those endpoints stay on the scheduler's own 127.0.0.1). Only this machine can reach it unless "
+        "a host is named here (0.0.0.0:8787 for every interface): it shows task arguments and worker logs.",
+    )
     ingest_max_faces: int = Field(default=500_000, description="Reject shapes with more triangles than this.")
     ingest_max_file_mb: float = Field(default=100.0, description="Reject source files larger than this (MB).")
     ingest_max_image_megapixels: float = Field(
@@ -81,6 +87,14 @@ class Settings(BaseSettings):
             if value.startswith(prefix):
                 return "postgresql+psycopg://" + value[len(prefix) :]
         return value
+
+    @field_validator("dask_dashboard_address")
+    @classmethod
+    def _no_dashboard(cls, value: str | None) -> str | None:
+        """An empty value (or "none"/"off") turns the dashboard off."""
+        if value is None or value.strip().lower() in ("", "none", "off", "false"):
+            return None
+        return value.strip()
 
     @property
     def resolved_database_url(self) -> str:

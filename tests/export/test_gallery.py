@@ -85,3 +85,39 @@ def test_gallery_loads_in_chromium_and_sorts(tmp_path):
     assert by_hog_asc == "3,1,2" and by_hog_desc == "2,1,3"
     assert good_count == "1"
     assert (tmp_path / "gallery.png").stat().st_size > 1000
+
+
+HOSTILE_URLS = ("javascript:alert(document.domain)", " JaVaScRiPt:alert(1)", "java\nscript:alert(1)",
+                "data:text/html,<script>alert(1)</script>", "vbscript:msgbox(1)", "//evil.example/x", "file:///etc/passwd")
+
+
+def test_gallery_links_only_web_urls_and_escapes_text(tmp_path):
+    """Security: a hostile source_url is shown as text, never a link; names and texts are escaped."""
+    entries, _ = _entries(tmp_path)
+    entry = entries[0]
+    entry.shape_name = 'chair"><script>alert("shape")</script>'
+    entry.grade_note = "<img src=x onerror=alert(1)>"
+    entry.grader = "me\u202egnp.exe"
+    entry.licenses = [
+        {"role": "material", "name": f"<b>m{i}</b>", "license": "CC0<i>", "attribution": "a\nb<script>",
+         "source_url": url} for i, url in enumerate(HOSTILE_URLS)
+    ] + [{"role": "shape", "name": "ok", "license": "CC0-1.0", "source_url": "https://example.org/ok?a=1&b=2"}]
+    materials = [GalleryMaterial(10 + i, f"m{i}<svg onload=alert(1)>", "wood", license="CC0-1.0",
+                                 attribution='x" onmouseover="alert(1)', source_url=url)
+                 for i, url in enumerate(HOSTILE_URLS)]
+    write_gallery(tmp_path / "site", entries, materials)
+    site = tmp_path / "site"
+    pages = {p.relative_to(site).as_posix(): p.read_text() for p in site.rglob("*.html")}
+    for name, text in pages.items():
+        lowered = text.lower()
+        for scheme in ("javascript:", "data:text", "vbscript:", "file:", "//evil"):
+            assert f'href="{scheme}' not in lowered and f"href=\" {scheme}" not in lowered, (name, scheme)
+        assert "<script>alert" not in lowered and "<img src=x" not in lowered and "<svg" not in lowered, name
+        assert "onmouseover=\"alert" not in lowered and "\u202e" not in text, name
+    pair, materials_page = pages["pairs/1-classifier-1.html"], pages["materials.html"]
+    assert pair.count("javascript:alert(document.domain)") == 1  # shown, as text
+    assert '<a href="https://example.org/ok?a=1&amp;b=2" rel="noreferrer noopener">source</a>' in pair
+    assert pair.count(">source</a>") == 1 and ">source</a>" not in materials_page  # the only http(s) URL
+    assert "&lt;script&gt;alert(&#34;shape&#34;)&lt;/script&gt;" in pages["index.html"]
+    assert "&lt;img src=x onerror=alert(1)&gt;" in pair and "me\\u202egnp.exe" in pair
+    assert "m0&lt;svg onload=alert(1)&gt;" in materials_page and "x&#34; onmouseover=&#34;alert(1)" in materials_page

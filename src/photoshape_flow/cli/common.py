@@ -7,13 +7,15 @@ from typing import NoReturn
 import typer
 from rich.console import Console
 
+from photoshape_flow.masking import mask_password
+
 console = Console()
 err_console = Console(stderr=True)
 
 
 def fail(message: str, code: int = 1) -> NoReturn:
-    """Print a one-line error and exit non-zero."""
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+    """Print a one-line error and exit non-zero (database passwords masked, whatever the message quotes)."""
+    err_console.print(f"[bold red]error:[/] {mask_password(message)}", highlight=False)
     raise typer.Exit(code)
 
 
@@ -38,12 +40,18 @@ def get_store():  # type: ignore[no-untyped-def]
     return BlobStore(get_settings().blob_root)
 
 
+def shown_database_url() -> str:
+    """The database URL in effect, as every verb prints it: password masked."""
+    from photoshape_flow.config import get_settings
+
+    return mask_password(get_settings().resolved_database_url)
+
+
 def require_database() -> None:
     """Fail with one line when the database cannot be reached or is not migrated to the head."""
-    from photoshape_flow.config import get_settings
     from photoshape_flow.db import migrate
 
-    url = get_settings().resolved_database_url
+    url = shown_database_url()
     try:
         up_to_date = migrate.is_up_to_date()
     except Exception as exc:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from photoshape_flow.cli.common import console, fail
+from photoshape_flow.cli.common import console, fail, shown_database_url
 
 db_app = typer.Typer(help="Migrate the metadata database (Alembic).", no_args_is_help=True)
 
@@ -33,13 +33,12 @@ def downgrade(revision: str = typer.Argument("-1", help="Target revision, e.g. -
 @db_app.command("current")
 def current() -> None:
     """Show the database's revision and whether it is the head."""
-    from photoshape_flow.config import get_settings
     from photoshape_flow.db import migrate
 
     rev = migrate.current_revision()
     heads = migrate.heads()
     state = "up to date" if rev in heads else f"behind head {', '.join(heads)}"
-    console.print(f"{get_settings().resolved_database_url}: revision {rev} ({state})", highlight=False)
+    console.print(f"{shown_database_url()}: revision {rev} ({state})", highlight=False)
 
 
 @db_app.command("heads")

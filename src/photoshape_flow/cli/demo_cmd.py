@@ -7,7 +7,7 @@ from enum import StrEnum
 
 import typer
 
-from photoshape_flow.cli.common import console, fail, setup_logging
+from photoshape_flow.cli.common import console, fail, setup_logging, shown_database_url
 
 
 class DemoSize(StrEnum):
@@ -41,7 +41,7 @@ def demo(
     try:
         migrate.upgrade()
     except Exception as exc:
-        fail(f"{settings.resolved_database_url}: cannot migrate ({exc})")
+        fail(f"{shown_database_url()}: cannot migrate ({exc})")
     out_dir = settings.data_root / "demo" / size.value
     console.print(f"generating the {size.value} demo collections in {out_dir} ...", highlight=False)
     manifest = generate_demo(out_dir, size.value, seed=settings.seed if seed is None else seed)
@@ -71,7 +71,7 @@ def demo(
     console.print(f"\n[bold]demo finished in {elapsed / 60:.1f} min[/]")
     console.print(f"  gallery:  {gallery_dir(ctx) / 'index.html'}", highlight=False)
     console.print(f"  exports:  {settings.data_root / 'exports'}", highlight=False)
-    console.print(f"  database: {settings.resolved_database_url}  (try `photoshape status`, or the SQL view "
+    console.print(f"  database: {shown_database_url()}  (try `photoshape status`, or the SQL view "
                   "photoshape_candidate)", highlight=False)
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console
+from photoshape_flow.cli.common import console, shown_database_url
 
 
 @dataclass
@@ -53,7 +53,7 @@ def check_database() -> list[Check]:
     from photoshape_flow.db import migrate
 
     url = get_settings().resolved_database_url
-    shown = url.split("@")[-1] if "@" in url else url
+    shown = shown_database_url()
     try:
         rev = migrate.current_revision()
     except Exception as exc:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, require_database
+from photoshape_flow.cli.common import console, require_database, shown_database_url
 
 
 def status() -> None:
@@ -20,7 +20,7 @@ def status() -> None:
     with session_scope() as session:
         stages = stage_progress(session)
         tables = table_counts(session)
-    console.print(f"database: {settings.resolved_database_url}", highlight=False)
+    console.print(f"database: {shown_database_url()}", highlight=False)
     console.print(f"data root: {settings.data_root.resolve()}", highlight=False)
     st = Table(title="stages")
     for col in ("stage", "unit", "done", "pending", "failed"):

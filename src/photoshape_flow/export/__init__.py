@@ -11,7 +11,10 @@ every format's texcoords (see `export.geometry`).
 - `obj.write_obj`: OBJ + MTL (PBR extension) + textures.
 - `assignment.assignment_document`: the `assignment.json` sidecar (parts, materials, licences).
 - `bundle.export_photoshape`: all of the above into one folder, atomically.
-- `gallery.write_gallery`: the static HTML gallery.
+- `gallery.write_gallery`: the static HTML gallery, from the Jinja2 templates in ``templates/``
+  (`templating`: autoescaped, links only to http(s) URLs).
+- `text.one_line`: the one escaping of metadata (names, licences, attributions, URLs) that every
+  format and the gallery use, so hostile text stays inert (a newline never starts an OBJ line).
 - `validate.validate_gltf` and `browser.check_pages`: the Khronos glTF validator and headless
   Chromium, through the pinned npm packages in `export/node/` (``npm ci --prefix .../export/node``).
 """

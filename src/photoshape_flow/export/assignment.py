@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from photoshape_flow.export.text import one_line
 from photoshape_flow.render.specs import uv_matrix
 
 FORMAT = "photoshape_flow.assignment/1"
@@ -117,7 +118,11 @@ def _unique(items: Sequence[Provenance]) -> list[Provenance]:
 
 
 def attribution_lines(document: Mapping[str, Any]) -> list[str]:
-    """One human-readable line per licensed item (for glTF ``copyright``, OBJ/MTL headers, README)."""
+    """One human-readable line per licensed item (for glTF ``copyright``, OBJ/MTL headers, ATTRIBUTION.txt).
+
+    Each is one line however the recorded text reads (`export.text.one_line`): a newline in an
+    attribution must not become a line of its own in a line-based format.
+    """
     lines = []
     for item in document.get("licenses", []):
         text = f"{item['role']} {item.get('name') or item.get('id')}: {item.get('license') or 'licence unknown'}"
@@ -125,5 +130,5 @@ def attribution_lines(document: Mapping[str, Any]) -> list[str]:
             text += f", {item['attribution']}"
         if item.get("source_url"):
             text += f" <{item['source_url']}>"
-        lines.append(text)
+        lines.append(one_line(text))
     return lines

@@ -7,7 +7,8 @@ roughness in G and metallic in B, OpenGL-convention normal map. Texcoords carry 
 transform baked in (see `export.geometry` for why not KHR_texture_transform), samplers repeat.
 Primitives with a normal map get a TANGENT attribute built from the baked UVs the way Mitsuba's
 `normalmap` frame is (dP/du), so viewers need not guess one (the validator warns when they must).
-Metadata (licences, assignment) goes into ``asset.extras`` and ``asset.copyright``. The output
+Metadata (licences, assignment) goes into ``asset.extras`` and ``asset.copyright``, and names into
+``name``, each string on one line without control characters (`export.text`). The output
 passes the Khronos validator (`export.validate.validate_gltf`).
 """
 
@@ -23,6 +24,7 @@ import numpy as np
 
 from photoshape_flow.export.geometry import export_parts, gltf_texcoords, tangents
 from photoshape_flow.export.pbr import EncodedImage, PbrMaterial, ResolveRef, pbr_materials
+from photoshape_flow.export.text import one_line, one_line_strings, safe_name
 
 FLOAT, UINT32 = 5126, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -97,7 +99,7 @@ class _Builder:
     def material(self, mat: PbrMaterial) -> int:
         if id(mat) in self._materials:
             return self._materials[id(mat)]
-        stem = _safe(mat.name)
+        stem = safe_name(mat.name)
         pbr: dict[str, Any] = {
             "baseColorFactor": [round(float(c), 6) for c in mat.base_color_factor],
             "metallicFactor": float(np.clip(mat.metallic_factor, 0, 1)),
@@ -107,10 +109,11 @@ class _Builder:
             pbr["baseColorTexture"] = {"index": self.texture(mat.base_color, f"{stem}_basecolor")}
         if mat.orm is not None:
             pbr["metallicRoughnessTexture"] = {"index": self.texture(mat.orm, f"{stem}_orm")}
-        entry: dict[str, Any] = {"name": mat.name, "pbrMetallicRoughness": pbr, "doubleSided": True}
+        entry: dict[str, Any] = {"name": one_line(mat.name), "pbrMetallicRoughness": pbr, "doubleSided": True}
         if mat.normal is not None:
             entry["normalTexture"] = {"index": self.texture(mat.normal, f"{stem}_normal")}
-        extras = {k: v for k, v in (("substance", mat.substance), ("scale", mat.scale)) if v is not None}
+        extras = {k: v for k, v in (("substance", one_line_strings(mat.substance)), ("scale", mat.scale))
+                  if v is not None}
         if mat.builtin:
             extras["builtin"] = True
         if extras:
@@ -126,11 +129,6 @@ class _Builder:
             if not self.gltf[key]:
                 del self.gltf[key]
         return self.gltf
-
-
-def _safe(name: str) -> str:
-    cleaned = "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._")
-    return cleaned or "material"
 
 
 def build_gltf(
@@ -168,17 +166,17 @@ def build_gltf(
             "material": b.material(material),
             "mode": 4,
         }
-        b.gltf["meshes"].append({"name": part.name, "primitives": [primitive]})
-        b.gltf["nodes"].append({"name": part.name, "mesh": len(b.gltf["meshes"]) - 1,
+        b.gltf["meshes"].append({"name": one_line(part.name), "primitives": [primitive]})
+        b.gltf["nodes"].append({"name": one_line(part.name), "mesh": len(b.gltf["meshes"]) - 1,
                                 "extras": {"part_index": part.index}})
         children.append(len(b.gltf["nodes"]) - 1)
-    b.gltf["nodes"].append({"name": name, "children": children})
-    b.gltf["scenes"].append({"name": name, "nodes": [len(b.gltf["nodes"]) - 1]})
-    if metadata:
-        b.gltf["asset"]["extras"] = json.loads(json.dumps(metadata, default=str))
+    b.gltf["nodes"].append({"name": one_line(name), "children": children})
+    b.gltf["scenes"].append({"name": one_line(name), "nodes": [len(b.gltf["nodes"]) - 1]})
+    if metadata:  # viewers show these strings as they are: one line each, like every export
+        b.gltf["asset"]["extras"] = one_line_strings(json.loads(json.dumps(metadata, default=str)))
         copyright_ = metadata.get("copyright")
         if copyright_:
-            b.gltf["asset"]["copyright"] = str(copyright_)
+            b.gltf["asset"]["copyright"] = one_line(copyright_)
     gltf = b.finish()
     gltf["buffers"].append({"byteLength": len(b.blob)})
     return gltf, bytes(b.blob), b.image_files

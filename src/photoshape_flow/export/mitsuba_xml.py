@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from photoshape_flow.export.pbr import ResolveRef
+from photoshape_flow.export.text import safe_name
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, material_from_builtin
 
@@ -46,10 +47,6 @@ def concrete_materials(shape: Any, materials: Sequence[Any] | None, resolve_ref:
     return out
 
 
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._") or "texture"
-
-
 def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str], name: str = "texture") -> Any:
     """Copy of a scene-dict value with Bitmaps written to EXR files named after where they sit
     (``<material>_base_color.exr``), each Bitmap object once."""
@@ -58,9 +55,9 @@ def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str], nam
         for key, item in value.items():
             if key == "bitmap" and isinstance(item, mi.Bitmap):
                 if id(item) not in written:
-                    target = stage / f"{_safe(name)}.exr"
+                    target = stage / f"{safe_name(name, 'texture')}.exr"
                     if target.exists():
-                        target = stage / f"{_safe(name)}_{len(written)}.exr"
+                        target = stage / f"{safe_name(name, 'texture')}_{len(written)}.exr"
                     if item.srgb_gamma():  # EXR is linear by definition: linearise, or the flag is lost
                         item = item.convert(item.pixel_format(), mi.Struct.Type.Float32, False)
                     item.write(str(target))

@@ -21,11 +21,12 @@ from typing import Any
 
 from photoshape_flow.export.geometry import export_parts
 from photoshape_flow.export.pbr import PbrMaterial, ResolveRef, pbr_materials
+from photoshape_flow.export.text import one_line, safe_name
 
 
-def _safe(name: str) -> str:
-    cleaned = "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._")
-    return cleaned or "material"
+def _comment(text: object) -> str:
+    """A comment line whose text cannot end it (`export.text.one_line`): metadata stays inert."""
+    return f"# {one_line(text)}"
 
 
 def _ns(roughness: float) -> float:
@@ -46,7 +47,7 @@ def write_obj(
 ) -> list[Path]:
     """Write `<stem>.obj`, `<stem>.mtl` and the textures; returns every file written.
 
-    `header` lines (licences, attribution) go into both files as comments.
+    `header` lines (licences, attribution) go into both files as comments, each kept on its line.
     """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -57,23 +58,23 @@ def write_obj(
 
     names: dict[int, str] = {}  # id(material) -> unique MTL name
     files: dict[str, bytes] = {}
-    mtl_lines = [f"# {line}" for line in ("photoshape_flow MTL export", *header)]
+    mtl_lines = [_comment(line) for line in ("photoshape_flow MTL export", *header)]
     for part in parts:
         mat = by_index[part.index]
         if id(mat) in names:
             continue
-        name = _safe(mat.name)
+        name = safe_name(mat.name)
         while name in names.values():
             name = f"{name}_{len(names)}"
         names[id(mat)] = name
         mtl_lines += ["", *_mtl_entry(mat, name, texture_dir, files)]
 
     mtl_path = out.with_suffix(".mtl")
-    obj_lines = [f"# {line}" for line in ("photoshape_flow OBJ export", *header)]
+    obj_lines = [_comment(line) for line in ("photoshape_flow OBJ export", *header)]
     obj_lines.append(f"mtllib {mtl_path.name}")
     offset = 1
     for part in parts:
-        name = _safe(part.name)
+        name = safe_name(part.name)
         obj_lines += [f"o {name}", f"g {name}"]
         obj_lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in part.positions.tolist()]
         obj_lines += [f"vt {u:.7g} {v:.7g}" for u, v in part.texcoords.tolist()]
@@ -96,7 +97,7 @@ def write_obj(
 
 def _mtl_entry(mat: PbrMaterial, name: str, texture_dir: str, files: dict[str, bytes]) -> list[str]:
     def put(kind: str, data: bytes, ext: str) -> str:
-        rel = f"{texture_dir}/{name}_{kind}.{ext}"
+        rel = f"{texture_dir}/{name}_{safe_name(kind, 'map')}.{safe_name(ext, 'png')}"  # one token, no ../
         files[rel] = data
         return rel
 
@@ -113,7 +114,7 @@ def _mtl_entry(mat: PbrMaterial, name: str, texture_dir: str, files: dict[str, b
         f"Pm {_metallic(mat):.6f}",
     ]
     if mat.substance:
-        lines.insert(1, f"# substance: {mat.substance}")
+        lines.insert(1, _comment(f"substance: {mat.substance}"))
     if mat.base_color is not None:
         lines.append(f"map_Kd {put('basecolor', mat.base_color.data, mat.base_color.ext)}")
     if mat.roughness is not None:
@@ -126,7 +127,7 @@ def _mtl_entry(mat: PbrMaterial, name: str, texture_dir: str, files: dict[str, b
     for channel, source in sorted(mat.extra_maps.items()):
         data = Path(source).read_bytes()
         rel = put(channel, data, Path(source).suffix.lstrip(".").lower() or "png")
-        lines.append(f"# {channel} map (linear; no portable MTL statement): {rel}")
+        lines.append(_comment(f"{channel} map (linear; no portable MTL statement): {rel}"))
     return lines
 
 

@@ -1,0 +1,101 @@
+"""Security: the database password never appears in what is printed or logged (photoshape_flow.masking)."""
+
+from __future__ import annotations
+
+import logging
+import socket
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from photoshape_flow.cli import app
+from photoshape_flow.config import get_settings
+from photoshape_flow.masking import mask_password
+
+SECRET = "s3cret-Pa55"
+runner = CliRunner()
+
+
+def _use_url(monkeypatch: pytest.MonkeyPatch, url: str) -> None:
+    from photoshape_flow.db.session import get_engine
+
+    monkeypatch.setenv("PHOTOSHAPE_DATABASE_URL", url)
+    get_settings.cache_clear()
+    get_engine.cache_clear()
+
+
+def _flat(text: str) -> str:
+    """Output without whitespace: rich wraps long lines, possibly inside a URL."""
+    return "".join(text.split())
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_mask_password_keeps_user_host_and_database() -> None:
+    assert mask_password(f"postgresql+psycopg://ps:{SECRET}@db:5432/photo") == "postgresql+psycopg://ps:***@db:5432/photo"
+    assert mask_password(f"a postgres://u:{SECRET}@h/d and redis://:{SECRET}@r:6379/0.") == \
+        "a postgres://u:***@h/d and redis://:***@r:6379/0."
+    assert mask_password(f"host=db user=ps password={SECRET} dbname=x") == "host=db user=ps password=*** dbname=x"
+    assert mask_password(f"PASSWORD = '{SECRET} 2'") == "PASSWORD = ***"
+    for plain in ("postgresql+psycopg://ps@db:5432/photo", "sqlite:////tmp/a:b/photoshape.db", "http://h:8080/x"):
+        assert mask_password(plain) == plain
+
+
+def test_connection_errors_mask_the_password(settings_env: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _use_url(monkeypatch, f"postgresql+psycopg://ps_user:{SECRET}@127.0.0.1:{_closed_port()}/photoshape")
+    for verb in (["status"], ["db", "current"], ["demo", "--size", "tiny"]):
+        result = runner.invoke(app, verb)
+        assert result.exit_code != 0, verb
+        assert SECRET not in _flat(result.output) and SECRET not in str(result.exception), verb
+    result = runner.invoke(app, ["status"])
+    assert "ps_user:***@127.0.0.1" in _flat(result.output) and "cannotconnect" in _flat(result.output)
+
+
+def test_logged_urls_are_masked_for_every_logger_and_handler() -> None:
+    """The filter runs at record creation, so handlers added later (Prefect's API handler) get masked records."""
+    assert getattr(logging.getLogRecordFactory(), "masks_passwords", False)  # installed by importing photoshape_flow
+    seen: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            seen.append(self.format(record))
+
+    logger = logging.getLogger("prefect.flow_runs.test_masking")
+    handler = Collect()
+    logger.addHandler(handler)
+    try:
+        url = f"postgresql+psycopg://ps:{SECRET}@db/photo"
+        logger.warning("connecting to %s", url)
+        logger.warning(f"engine {url}")
+        try:
+            raise ConnectionError(f"cannot reach {url}")
+        except ConnectionError:
+            logger.exception("failed")
+    finally:
+        logger.removeHandler(handler)
+    assert len(seen) == 3 and "ps:***@db/photo" in seen[0] and "ps:***@db/photo" in seen[1]
+    assert "ConnectionError: cannot reach postgresql+psycopg://ps:***@db/photo" in seen[2]
+    assert not any(SECRET in line for line in seen)
+
+
+@pytest.mark.postgres
+def test_status_prints_the_url_without_its_password(pg_url: str, settings_env: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A reachable server (trust auth ignores the password): status, db current and doctor mask it."""
+    with_password = pg_url.replace("://postgres@", f"://postgres:{SECRET}@")
+    assert with_password != pg_url
+    _use_url(monkeypatch, with_password)
+    assert runner.invoke(app, ["db", "upgrade"]).exit_code == 0
+    status = runner.invoke(app, ["status"])
+    assert status.exit_code == 0 and "postgres:***@127.0.0.1" in _flat(status.output)
+    current = runner.invoke(app, ["db", "current"])
+    assert "up to date" in current.output
+    doctor = runner.invoke(app, ["doctor"])
+    assert "postgres:***@" in _flat(doctor.output)  # inside a table cell, which rich may wrap
+    for result in (status, current, doctor):
+        assert SECRET not in _flat(result.output)
