@@ -81,9 +81,16 @@ def _trigger(spec: dict[str, Any]) -> Any:
 
 
 def _schedule(spec: dict[str, Any]) -> Any:
-    from prefect.schedules import Cron
+    """A prefect.yaml schedule: `cron:` (with `timezone:`) or `interval:` in seconds (with `anchor_date:`)."""
+    from prefect.schedules import Cron, Interval
 
-    return Cron(spec["cron"], timezone=spec.get("timezone", "UTC"), active=spec.get("active", True))
+    active = spec.get("active", True)
+    if "interval" in spec:
+        anchor = spec.get("anchor_date")
+        if isinstance(anchor, str):
+            anchor = dt.datetime.fromisoformat(anchor)
+        return Interval(spec["interval"], anchor_date=anchor, timezone=spec.get("timezone"), active=active)
+    return Cron(spec["cron"], timezone=spec.get("timezone", "UTC"), active=active)
 
 
 def build_deployments(path: Path | None = None, names: Sequence[str] | None = None) -> list[Any]:
@@ -116,10 +123,11 @@ def build_deployments(path: Path | None = None, names: Sequence[str] | None = No
     return out
 
 
-def serve(names: Sequence[str] | None = None, limit: int | None = None) -> None:
-    """Serve the deployments in this process until interrupted (runs execute in subprocesses)."""
+def serve(names: Sequence[str] | None = None, limit: int | None = None, path: Path | None = None) -> None:
+    """Serve the deployments of prefect.yaml (or of `path`) in this process until interrupted (runs execute
+    in subprocesses). Their schedules are turned into flow runs by the Prefect server's scheduler."""
     from prefect import serve as prefect_serve
 
     if not get_settings().effective_prefect_api_url:
         raise RuntimeError("no Prefect API: start `prefect server start` and set PREFECT_API_URL")
-    prefect_serve(*build_deployments(names=names), limit=limit)
+    prefect_serve(*build_deployments(path, names=names), limit=limit)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import subprocess
@@ -28,10 +29,10 @@ def _healthy(url: str) -> bool:
         return False
 
 
-@pytest.fixture(scope="session")
-def prefect_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, str]]:
-    """`prefect server start` on a free port with its own SQLite; yields the env to talk to it."""
-    home = tmp_path_factory.mktemp("prefect-home")
+@contextlib.contextmanager
+def running_prefect_server(home: Path, **settings: str) -> Iterator[dict[str, str]]:
+    """`prefect server start` on 127.0.0.1, a free port and its own SQLite in `home`, with extra
+    PREFECT_* `settings` in its environment; yields the env to talk to it and stops it on exit."""
     port = _free_port()
     env = {
         **os.environ,
@@ -39,6 +40,7 @@ def prefect_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[st
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         "DO_NOT_TRACK": "1",
         "PREFECT_API_URL": "",
+        **settings,
     }
     log = open(home / "server.log", "w")
     prefect = Path(sys.executable).with_name("prefect")
@@ -61,3 +63,10 @@ def prefect_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[st
         except subprocess.TimeoutExpired:
             proc.kill()
         log.close()
+
+
+@pytest.fixture(scope="session")
+def prefect_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, str]]:
+    """`prefect server start` on a free port with its own SQLite; yields the env to talk to it."""
+    with running_prefect_server(tmp_path_factory.mktemp("prefect-home")) as env:
+        yield env

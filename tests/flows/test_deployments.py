@@ -49,6 +49,18 @@ def test_nightly_schedule_and_debounced_material_trigger() -> None:
     assert new.concurrency_options.collision_strategy == "CANCEL_NEW"
 
 
+def test_interval_schedules_are_read_from_the_declarations(tmp_path: Path) -> None:
+    (publish,) = [d for d in load_declarations() if d["name"] == "publish"]
+    schedules = [{"interval": 90, "anchor_date": "2026-01-01T00:00:00+00:00"}, {"cron": "0 3 * * *"}]
+    declarations = tmp_path / "prefect.yaml"
+    declarations.write_text(yaml.safe_dump({"deployments": [{**publish, "schedules": schedules}]}))
+    (deployment,) = build_deployments(declarations)
+    interval, cron = (s.schedule for s in deployment.schedules)
+    assert interval.interval == dt.timedelta(seconds=90)
+    assert interval.anchor_date == dt.datetime(2026, 1, 1, tzinfo=dt.UTC)
+    assert cron.cron == "0 3 * * *" and cron.timezone == "UTC"
+
+
 def test_flow_parameters_are_typed_for_ui_forms() -> None:
     from photoshape_flow.flows.deployments import load_flow
     from prefect.utilities.callables import parameter_schema

@@ -32,6 +32,9 @@ class Base(DeclarativeBase):
             dict[str, Any]: JSONType,
             list[Any]: JSONType,
             dt.datetime: sa.DateTime(timezone=True),
+            # Double as SQLAlchemy 2.1 maps it and the migrations declare it; 2.0 (pinned for Prefect's
+            # scheduler) would map float to Float, a different column type on SQLite.
+            float: sa.Double(),
         },
     )
 
