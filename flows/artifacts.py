@@ -48,16 +48,19 @@ def publish_candidates_table(key: str = "photoshape-candidates", rows: list[dict
 
 def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, Any] | None = None,
                     key: str = "photoshape-run-summary") -> None:
-    """Markdown: per-stage wall time and the done/pending/failed counts of every stage."""
+    """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage."""
+    from photoshape_flow.pipeline.progress import assumed_profile
     from photoshape_flow.stages import stage_progress
 
     with session_scope(get_settings().resolved_database_url) as session:
         progress = stage_progress(session)
-    lines = [f"# {title}", "", "| stage | seconds | unit | done | pending | failed |", "|---|---:|---|---:|---:|---:|"]
+        assumed = assumed_profile(session)
+    lines = [f"# {title}", "", f"Counts assume {assumed.describe()}.", "",
+             "| stage | seconds | unit | done | pending | failed | rejected |", "|---|---:|---|---:|---:|---:|---:|"]
     for p in progress:
         seconds = stage_times.get(p.stage)
         shown = f"{seconds:.1f}" if seconds is not None else ""
-        lines.append(f"| {p.stage} | {shown} | {p.unit} | {p.done} | {p.pending} | {p.failed} |")
+        lines.append(f"| {p.stage} | {shown} | {p.unit} | {p.done} | {p.pending} | {p.failed} | {p.rejected} |")
     for name, value in (extra or {}).items():
         lines += ["", f"**{name}**: {value}"]
     create_markdown_artifact(markdown="\n".join(lines), key=key, description=title)

@@ -7,12 +7,14 @@ from rich.table import Table
 
 from photoshape_flow.cli.common import console, require_database, shown_database_url
 
+STAGE_COLUMNS = ("stage", "unit", "done", "pending", "failed", "rejected")
+
 
 def status() -> None:
-    """Counts per table and per stage: done / pending / failed."""
+    """Counts per table and per stage: done / pending / failed / rejected."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.progress import table_counts
+    from photoshape_flow.pipeline.progress import assumed_profile, table_counts
     from photoshape_flow.stages import stage_progress
 
     settings = get_settings()
@@ -20,13 +22,15 @@ def status() -> None:
     with session_scope() as session:
         stages = stage_progress(session)
         tables = table_counts(session)
+        assumed = assumed_profile(session)
     console.print(f"database: {shown_database_url()}", highlight=False)
     console.print(f"data root: {settings.data_root.resolve()}", highlight=False)
+    console.print(f"counts assume {assumed.describe()}", highlight=False, soft_wrap=True)
     st = Table(title="stages")
-    for col in ("stage", "unit", "done", "pending", "failed"):
+    for col in STAGE_COLUMNS:
         st.add_column(col, justify="left" if col in ("stage", "unit") else "right")
     for p in stages:
-        st.add_row(p.stage, p.unit, str(p.done), str(p.pending), str(p.failed))
+        st.add_row(*(str(getattr(p, col)) for col in STAGE_COLUMNS))
     console.print(st)
     tt = Table(title="tables")
     tt.add_column("table")

@@ -1,7 +1,10 @@
-"""Per-stage progress (done / pending / failed) computed from the rows each stage records.
+"""Per-stage progress (done / pending / failed / rejected) computed from the rows each stage records.
 
 One counter per stage; the stage registry (`photoshape_flow.stages`) names each stage's counter and
-`stages.stage_progress` runs them in pipeline order.
+`stages.stage_progress` runs them in pipeline order. `rejected` counts input the stage refused on
+purpose (a malformed file, a render its quality check discarded); `failed` counts errors and crashes,
+which a re-run retries. Where a count depends on the profile (publish: pairs up to `publish.max_rank`),
+it assumes the profile of the newest recorded run (`assumed_profile`).
 """
 
 from __future__ import annotations
@@ -12,6 +15,8 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
+from photoshape_flow.profiles import ResolvedProfile, resolve_profile
+from photoshape_flow.vocab import STATUS_OK, STATUS_REJECTED
 
 # the `descriptor` of every feature row coarse alignment writes (`HogParams.name`: hog-<channels>)
 COARSE_DESCRIPTOR_PREFIX = "hog-"
@@ -24,6 +29,31 @@ class StageProgress:
     done: int
     pending: int
     failed: int
+    rejected: int = 0
+
+
+@dataclass(frozen=True)
+class AssumedProfile:
+    """The profile progress counts assume: the newest recorded run's, else the default profile."""
+
+    resolved: ResolvedProfile
+    run_id: int | None  # the `pipeline_run` it came from; None: no run recorded (the default profile)
+
+    def describe(self) -> str:
+        overrides = "".join(f" --set {k}={v}" for k, v in self.resolved.overrides)
+        source = f"last run #{self.run_id}" if self.run_id is not None else "no run recorded yet"
+        return (f"profile {self.resolved.name}{overrides} ({source}; publish: pairs up to rank "
+                f"{self.resolved.profile.publish.max_rank})")
+
+
+def assumed_profile(session: Session) -> AssumedProfile:
+    from photoshape_flow.stages import last_run_profile  # the registry imports this module
+
+    resolved = last_run_profile(session)
+    if resolved is None:
+        return AssumedProfile(resolve_profile("default"), None)
+    run_id = session.execute(sa.select(sa.func.max(m.PipelineRun.id))).scalar_one()
+    return AssumedProfile(resolved, int(run_id))
 
 
 def _count(session: Session, query: sa.Select) -> int:
@@ -52,12 +82,21 @@ def _inferred() -> sa.Select:
     return sa.select(m.Assignment.pair_id).where(m.Assignment.method == "classifier")
 
 
+def _by_outcome(session: Session, query: sa.Select, status: sa.ColumnElement) -> tuple[int, int, int]:
+    """(ok, failed, rejected) rows of `query`: failed is every status but ok and rejected."""
+    return (
+        _count(session, query.where(status == STATUS_OK)),
+        _count(session, query.where(status.not_in((STATUS_OK, STATUS_REJECTED)))),
+        _count(session, query.where(status == STATUS_REJECTED)),
+    )
+
+
 def ingest_progress(session: Session) -> StageProgress:
-    ok_items = failed_items = 0
+    ok_items = failed_items = rejected_items = 0
     for model in (m.Shape, m.Exemplar, m.Material, m.Envmap):
-        ok_items += _count(session, sa.select(model.id).where(model.status == "ok"))
-        failed_items += _count(session, sa.select(model.id).where(model.status != "ok"))
-    return StageProgress("ingest", "items", ok_items, 0, failed_items)
+        ok, failed, rejected = _by_outcome(session, sa.select(model.id), model.status)
+        ok_items, failed_items, rejected_items = ok_items + ok, failed_items + failed, rejected_items + rejected
+    return StageProgress("ingest", "items", ok_items, 0, failed_items, rejected_items)
 
 
 def coarse_alignment_progress(session: Session) -> StageProgress:
@@ -107,13 +146,8 @@ def substances_progress(session: Session) -> StageProgress:
 
 def training_renders_progress(session: Session) -> StageProgress:
     renders = sa.select(m.Rendering.id).where(m.Rendering.kind.in_(("bootstrap", "training")))
-    return StageProgress(
-        "training-renders",
-        "renderings",
-        _count(session, renders.where(m.Rendering.status == "ok")),
-        0,
-        _count(session, renders.where(m.Rendering.status != "ok")),
-    )
+    ok, failed, rejected = _by_outcome(session, renders, m.Rendering.status)
+    return StageProgress("training-renders", "renderings", ok, 0, failed, rejected)
 
 
 def training_progress(session: Session) -> StageProgress:
@@ -132,15 +166,20 @@ def inference_progress(session: Session) -> StageProgress:
 
 
 def publish_progress(session: Session) -> StageProgress:
+    """Published pairs; pending: inferred pairs up to the assumed profile's `publish.max_rank` not yet tried."""
     pairs = active_pairs()
     published = sa.select(m.Rendering.pair_id).where(m.Rendering.kind == "photoshape", m.Rendering.status == "ok")
     publish_failed = sa.select(m.Rendering.pair_id).where(
         m.Rendering.kind == "photoshape", m.Rendering.status != "ok"
     )
+    max_rank = assumed_profile(session).resolved.profile.publish.max_rank
     done = _count(session, pairs.where(m.Pair.id.in_(published)))
     failed = _count(session, pairs.where(m.Pair.id.in_(publish_failed), m.Pair.id.not_in(published)))
-    pending = _count(session, pairs.where(m.Pair.id.in_(_inferred()), m.Pair.id.not_in(published)))
-    return StageProgress("publish", "pairs", done, max(pending - failed, 0), failed)
+    pending = _count(session, pairs.where(
+        m.Pair.rank <= max_rank, m.Pair.id.in_(_inferred()), m.Pair.id.not_in(published),
+        m.Pair.id.not_in(publish_failed),
+    ))
+    return StageProgress("publish", "pairs", done, pending, failed)
 
 
 def table_counts(session: Session) -> dict[str, dict[str, int]]:
