@@ -1,8 +1,9 @@
 """`photoshape ingest shapes|exemplars|materials|envmaps PATH...`: bring the four collections in.
 
 Each command shows a progress bar and ends with a summary (added / already present / replaced /
-rejected) and one line per rejected input naming the file and the reason. Rejections do not make
-the command fail unless `--strict` is given (exit code 2).
+rejected) and one line per rejected input naming the file and the reason. When anything was rejected
+the command exits with code 2 (`REJECTED_EXIT`) after saying how many and where the reasons are
+(`--allow-rejected` exits 0 instead); errors that stop the command exit 1.
 """
 
 from __future__ import annotations
@@ -23,8 +24,15 @@ ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps."
 
 PathsArg = typer.Argument(..., help="Files or folders (searched recursively).", show_default=False)
 AttributionOpt = typer.Option(None, help="Attribution to record.")
-StrictOpt = typer.Option(False, help="Exit with code 2 when anything was rejected.")
+AllowRejectedOpt = typer.Option(False, "--allow-rejected", help="Exit 0 even when inputs were rejected.")
+# the former opt-in to exit code 2, now the default: still accepted so scripts that pass it keep working
+StrictOpt = typer.Option(False, "--strict", hidden=True)
 VerboseOpt = typer.Option(False, "--verbose", "-v", help="Log each item.")
+
+REJECTED_EXIT = 2  # the exit code when inputs were rejected
+# the table each verb records its items in, and its name column (a rejected row keeps its reason in `error`)
+TABLES = {"shapes": ("shape", "source_id"), "exemplars": ("exemplar", "source_id"),
+          "materials": ("material", "name"), "envmaps": ("envmap", "name")}
 
 
 def _setup_logging(verbose: bool) -> None:
@@ -63,8 +71,12 @@ def _progress(title: str) -> Iterator[Callable[[str, int, int], None]]:
         yield update
 
 
-def print_summary(summary: Any, strict: bool = False) -> None:
-    """The summary table plus one line per rejection (and warnings), then the exit code."""
+def print_summary(summary: Any, allow_rejected: bool = False) -> None:
+    """The summary table plus one line per rejection (and warnings), then the exit code.
+
+    Exits with `REJECTED_EXIT` when anything was rejected (unless `allow_rejected`), after a line that
+    says how many and where the reasons are: the lines above and the collection's table.
+    """
     table = Table(title=f"ingest {summary.kind}", show_header=True)
     for column in ("added", "already present", "replaced", "rejected"):
         table.add_column(column, justify="right")
@@ -80,8 +92,14 @@ def print_summary(summary: Any, strict: bool = False) -> None:
         console.print(f"[dim]skipped[/] {label}: {reason}", highlight=False)
     for label, reason in summary.rejected:
         err_console.print(f"[red]rejected[/] {label}: {reason}", highlight=False)
-    if strict and summary.rejected:
-        raise typer.Exit(2)
+    if summary.rejected:
+        table_name, key = TABLES[summary.kind]
+        err_console.print(
+            f"[red]{len(summary.rejected)} of {summary.total} inputs rejected[/]: the reasons are on the "
+            f"'rejected' lines above and in table {table_name} (SELECT {key}, status, error FROM {table_name} "
+            "WHERE status != 'ok')", highlight=False)
+        if not allow_rejected:
+            raise typer.Exit(REJECTED_EXIT)
 
 
 @ingest_app.command("shapes")
@@ -99,6 +117,7 @@ def shapes(
     max_file_mb: float = typer.Option(100.0, help="Reject model files larger than this (MiB)."),
     timeout: float = typer.Option(600.0, help="Seconds per shape before the importer is killed."),
     isolate: bool = typer.Option(True, help="Parse in a child process (a crashing importer costs one item)."),
+    allow_rejected: bool = AllowRejectedOpt,
     strict: bool = StrictOpt,
     verbose: bool = VerboseOpt,
 ) -> None:
@@ -114,7 +133,7 @@ def shapes(
                                     progress=progress)
     except ValueError as exc:
         fail(str(exc))
-    print_summary(summary, strict)
+    print_summary(summary, allow_rejected)
 
 
 @ingest_app.command("exemplars")
@@ -127,6 +146,7 @@ def exemplars(
     attribution: str | None = AttributionOpt,
     source_url: str | None = typer.Option(None, help="Where the photos came from."),
     max_megapixels: float = typer.Option(64.0, help="Reject images with more pixels (decompression bombs)."),
+    allow_rejected: bool = AllowRejectedOpt,
     strict: bool = StrictOpt,
     verbose: bool = VerboseOpt,
 ) -> None:
@@ -140,7 +160,7 @@ def exemplars(
     with _progress("exemplars") as progress:
         summary = ingest_exemplars(paths, source=source, category=category, size=size, license=license,
                                    attribution=attribution, source_url=source_url, limits=limits, progress=progress)
-    print_summary(summary, strict)
+    print_summary(summary, allow_rejected)
 
 
 @ingest_app.command("materials")
@@ -151,6 +171,7 @@ def materials(
     license: str | None = typer.Option(None, "--license", help="Licence to record (sidecars take precedence)."),
     attribution: str | None = AttributionOpt,
     previews: bool = typer.Option(True, help="Render sphere previews when the renderer is available."),
+    allow_rejected: bool = AllowRejectedOpt,
     strict: bool = StrictOpt,
     verbose: bool = VerboseOpt,
 ) -> None:
@@ -164,7 +185,7 @@ def materials(
         summary = ingest_materials(paths, substance=substance, source=source, license=license,
                                    attribution=attribution, previews=previews, progress=progress,
                                    events=PrefectEvents(get_settings()))
-    print_summary(summary, strict)
+    print_summary(summary, allow_rejected)
 
 
 @ingest_app.command("envmaps")
@@ -174,6 +195,7 @@ def envmaps(
     license: str | None = typer.Option(None, "--license", help="Licence to record."),
     attribution: str | None = AttributionOpt,
     source_url: str | None = typer.Option(None, help="Where the maps came from."),
+    allow_rejected: bool = AllowRejectedOpt,
     strict: bool = StrictOpt,
     verbose: bool = VerboseOpt,
 ) -> None:
@@ -184,7 +206,7 @@ def envmaps(
     with _progress("envmaps") as progress:
         summary = ingest_envmaps(paths, split=split, license=license, attribution=attribution,
                                  source_url=source_url, progress=progress)
-    print_summary(summary, strict)
+    print_summary(summary, allow_rejected)
 
 
 def register(app: typer.Typer) -> None:
