@@ -22,14 +22,36 @@ def test_help_lists_the_verbs_with_one_line_help() -> None:
         assert verb in result.output
 
 
+def test_version_prints_the_installed_version() -> None:
+    from importlib.metadata import version
+
+    result = invoke("--version")
+    assert result.exit_code == 0, result.output
+    assert result.output.strip() == f"photoshape_flow {version('photoshape_flow')}"
+
+
+def test_db_upgrade_says_when_it_creates_a_new_database(settings_env: Path) -> None:
+    result = invoke("db", "upgrade")
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if "new database" in line]
+    assert lines == [f"created a new database at {(settings_env / 'photoshape.db').resolve()} (it was empty; "
+                     "check PHOTOSHAPE_DATA_ROOT if you meant an existing one)"]
+    again = invoke("db", "upgrade")  # an existing database: no such line
+    assert again.exit_code == 0 and "new database" not in again.output
+
+
 def test_db_upgrade_current_and_status(settings_env: Path) -> None:
     result = invoke("status")
     assert result.exit_code == 1 and "not migrated" in result.output
-    assert invoke("db", "upgrade").exit_code == 0
+    upgraded = invoke("db", "upgrade")  # `status` made the file, but it is still a new (empty) database
+    assert upgraded.exit_code == 0 and "created a new database at" in upgraded.output
     current = invoke("db", "current")
     assert "up to date" in current.output
     status = invoke("status")
     assert status.exit_code == 0
+    flat = " ".join(status.output.split())
+    assert "counts assume profile default (no run recorded yet; publish: pairs up to rank 12)" in flat
+    assert "rejected" in flat
     for stage in ("ingest", "coarse-alignment", "fine-alignment", "substances", "training-renders", "training",
                   "inference", "publish"):
         assert stage in status.output

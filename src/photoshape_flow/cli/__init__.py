@@ -26,6 +26,30 @@ VERB_MODULES: tuple[str, ...] = (
 )
 
 
+def package_version() -> str:
+    """The installed distribution's version (what `photoshape --version` prints)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("photoshape_flow")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        return "unknown (not installed)"
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        typer.echo(f"photoshape_flow {package_version()}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: bool = typer.Option(False, "--version", help="Print the version and exit.", is_eager=True,
+                                 callback=_show_version),
+) -> None:
+    """Photorealistic, relightable materials for 3D shape collections (PhotoShape, SIGGRAPH Asia 2018)."""
+
+
 def _register_verbs() -> None:
     for name in VERB_MODULES:
         module_name = f"{__name__}.{name}_cmd"

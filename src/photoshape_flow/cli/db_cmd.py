@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 from photoshape_flow.cli.common import console, fail, shown_database_url
@@ -15,10 +17,33 @@ def upgrade(revision: str = typer.Argument("head", help="Target revision.")) -> 
     from photoshape_flow.db import migrate
 
     try:
+        created = new_database_note()
         migrate.upgrade(revision=revision)
     except Exception as exc:  # surface connection errors as one line
         fail(f"upgrade failed: {exc}")
+    if created:
+        console.print(created, highlight=False, soft_wrap=True)
     console.print(f"database at revision [bold]{migrate.current_revision()}[/]")
+
+
+def new_database_note() -> str | None:
+    """One line to print when the upgrade creates a new database (a mistyped data root makes one), else None.
+
+    New: the database has no tables at all (for SQLite the file is created on the first connection).
+    """
+    import sqlalchemy as sa
+
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db.session import get_engine
+
+    if sa.inspect(get_engine()).get_table_names():
+        return None
+    url = sa.engine.make_url(get_settings().resolved_database_url)
+    if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
+        where, setting = str(Path(url.database).resolve()), "PHOTOSHAPE_DATA_ROOT"
+    else:
+        where, setting = shown_database_url(), "PHOTOSHAPE_DATABASE_URL"
+    return f"created a new database at {where} (it was empty; check {setting} if you meant an existing one)"
 
 
 @db_app.command("downgrade")
