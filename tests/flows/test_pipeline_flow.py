@@ -55,20 +55,33 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
     migrate.upgrade()
     with prefect_test_harness(server_startup_timeout=120):
         result = photoshape_pipeline(profile="tiny")
+        with session_scope() as session:  # what `photoshape status` shows after the finished run
+            finished = stage_progress(session)
+            render_outcomes = dict(session.execute(
+                sa.select(m.Rendering.status, sa.func.count()).where(m.Rendering.kind.in_(("bootstrap", "training")))
+                .group_by(m.Rendering.status)).all())
         new_ids = add_materials(tmp_path, tiny_demo)
         rerun = new_materials(profile="tiny", renders_per_material=6)
         from prefect.client.orchestration import get_client
 
-        async def artifact_keys():  # type: ignore[no-untyped-def]
+        async def artifacts():  # type: ignore[no-untyped-def]
             async with get_client() as client:
-                return {a.key for a in await client.read_artifacts()}
+                return {a.key: a.data for a in await client.read_artifacts()}
 
         import asyncio
 
-        keys = asyncio.run(artifact_keys())
+        data = asyncio.run(artifacts())
+        keys = set(data)
     assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
                                        "training-renders", "training", "inference", "publish"]
     assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-progress"} <= keys
+    # nothing is pending after a finished run: publish counts only pairs up to the tiny profile's max_rank
+    assert {p.stage: p.pending for p in finished} == dict.fromkeys(result["seconds"], 0)
+    renders = {p.stage: p for p in finished}["training-renders"]
+    assert renders.rejected == render_outcomes.get("rejected", 0)  # rejected renders are not failures
+    assert renders.failed == sum(n for status, n in render_outcomes.items() if status not in ("ok", "rejected"))
+    summary = str(data["photoshape-run-summary"])
+    assert "| failed | rejected |" in summary and "Counts assume profile tiny (last run #" in summary
     with session_scope() as session:
         progress = {p.stage: p for p in stage_progress(session)}
         candidates = session.execute(sa.text("SELECT COUNT(DISTINCT pair_id) FROM photoshape_candidate "
