@@ -90,12 +90,13 @@ def test_status_prints_the_url_without_its_password(pg_url: str, settings_env: P
     with_password = pg_url.replace("://postgres@", f"://postgres:{SECRET}@")
     assert with_password != pg_url
     _use_url(monkeypatch, with_password)
-    assert runner.invoke(app, ["db", "upgrade"]).exit_code == 0
+    upgrade = runner.invoke(app, ["db", "upgrade"])  # a fresh database: the new-database line, masked
+    assert upgrade.exit_code == 0 and "created a new database at postgresql+psycopg://postgres:***@" in upgrade.output
     status = runner.invoke(app, ["status"])
     assert status.exit_code == 0 and "postgres:***@127.0.0.1" in _flat(status.output)
     current = runner.invoke(app, ["db", "current"])
     assert "up to date" in current.output
     doctor = runner.invoke(app, ["doctor"])
     assert "postgres:***@" in _flat(doctor.output)  # inside a table cell, which rich may wrap
-    for result in (status, current, doctor):
+    for result in (upgrade, status, current, doctor):
         assert SECRET not in _flat(result.output)
