@@ -97,7 +97,7 @@ def print_summary(summary: Any, allow_rejected: bool = False) -> None:
         err_console.print(
             f"[red]{len(summary.rejected)} of {summary.total} inputs rejected[/]: the reasons are on the "
             f"'rejected' lines above and in table {table_name} (SELECT {key}, status, error FROM {table_name} "
-            "WHERE status != 'ok')", highlight=False)
+            "WHERE status != 'ok')", highlight=False, soft_wrap=True)
         if not allow_rejected:
             raise typer.Exit(REJECTED_EXIT)
 
