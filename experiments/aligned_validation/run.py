@@ -46,8 +46,6 @@ import json
 import sys
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import sqlalchemy as sa
@@ -65,48 +63,12 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.training import load_material_classifier
-from photoshape_flow.pipeline.training_renders import material_spec
+from photoshape_flow.pipeline.training_renders import RenderInputs
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCES
 
 from ..common import load_evidence, results_dir
-
-
-@dataclass
-class RenderInputs:
-    """Rows and render inputs of the validation renders' specs, each loaded once."""
-
-    store: BlobStore
-    shapes: dict[int, Any] = field(default_factory=dict)
-    meshes: dict[int, Any] = field(default_factory=dict)
-    materials: dict[int, Any] = field(default_factory=dict)
-    envmaps: dict[int, Any] = field(default_factory=dict)
-
-    def load(self, session: Session, spec: RenderSpec) -> None:
-        if spec.shape_id not in self.shapes:
-            self.shapes[spec.shape_id] = session.get(m.Shape, spec.shape_id)
-        missing = [p.material_id for p in spec.parts if p.material_id not in self.materials]
-        if missing:
-            for row in session.execute(sa.select(m.Material).where(m.Material.id.in_(missing))).scalars():
-                self.materials[row.id] = row
-        if spec.envmap.envmap_id not in self.envmaps:
-            self.envmaps[spec.envmap.envmap_id] = session.get(m.Envmap, spec.envmap.envmap_id)
-
-    def mesh(self, shape_id: int) -> Any:
-        if shape_id not in self.meshes:
-            from photoshape_flow.geometry.mesh import ShapeMesh
-
-            self.meshes[shape_id] = ShapeMesh.from_npz_bytes(self.store.read_bytes(self.shapes[shape_id].mesh_blob))
-        return self.meshes[shape_id]
-
-    def material_specs(self, spec: RenderSpec) -> dict[int, Any]:
-        return {p.material_id: material_spec(self.materials[p.material_id], self.store) for p in spec.parts}
-
-    def envmap_spec(self, envmap_id: int) -> Any:
-        from photoshape_flow.render import EnvmapSpec
-
-        return EnvmapSpec(path=self.store.resolve(self.envmaps[envmap_id].blob))
 
 
 def validation_specs(session: Session, count: int) -> list[tuple[m.Rendering, RenderSpec]]:

@@ -15,6 +15,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
+from photoshape_flow.pipeline.runs import last_run
 from photoshape_flow.profiles import ResolvedProfile, resolve_profile
 from photoshape_flow.vocab import STATUS_OK, STATUS_REJECTED
 
@@ -47,13 +48,10 @@ class AssumedProfile:
 
 
 def assumed_profile(session: Session) -> AssumedProfile:
-    from photoshape_flow.stages import last_run_profile  # the registry imports this module
-
-    resolved = last_run_profile(session)
-    if resolved is None:
+    row = last_run(session)
+    if row is None:
         return AssumedProfile(resolve_profile("default"), None)
-    run_id = session.execute(sa.select(sa.func.max(m.PipelineRun.id))).scalar_one()
-    return AssumedProfile(resolved, int(run_id))
+    return AssumedProfile(resolve_profile(row.profile_name, dict(row.overrides or {})), int(row.id))
 
 
 def _count(session: Session, query: sa.Select) -> int:

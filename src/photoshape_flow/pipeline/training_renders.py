@@ -221,8 +221,8 @@ def split_counts(count: int, pools: RenderPools, val_fraction: float = VAL_FRACT
 
 
 @dataclass
-class _Inputs:
-    """Per-run caches of rows and derived render inputs."""
+class RenderInputs:
+    """Per-run caches of a render spec's rows and derived render inputs (meshes, material and envmap specs)."""
 
     store: BlobStore
     shapes: dict[int, Any] = field(default_factory=dict)
@@ -328,7 +328,7 @@ def run_training_renders(
         log.warning("%s round: %s", round, warning)
 
     keys = [(split, item_key(round, split, i)) for split in SPLITS for i in range(per_split[split])]
-    inputs = _Inputs(store=store)
+    inputs = RenderInputs(store=store)
     summary: dict[str, Any] = {
         "round": round, "requested": count, "splits": per_split, "rendered": 0, "skipped": 0,
         "rejected": 0, "failed": 0, "render_seconds": 0.0, "pose_source": pools.pose_source,

@@ -6,12 +6,12 @@
      'inference', 'publish']
 """
 
+from photoshape_flow.pipeline.runs import last_run_profile
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.registry import REGISTRY, STAGE_NAMES, STAGES, Stage, get_stage
 from photoshape_flow.stages.report import Blocked, StageReport
 from photoshape_flow.stages.run import (
     finish,
-    last_run_profile,
     plan_batches,
     process,
     run_all,

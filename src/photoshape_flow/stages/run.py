@@ -95,18 +95,6 @@ def finish_run(ctx: StageContext, run_id: int, error: str | None) -> None:
             row.status, row.error, row.finished_at = ("failed" if error else "ok"), error, utcnow()
 
 
-def last_run_profile(session: Session) -> ResolvedProfile | None:
-    """The profile of the newest recorded run (what the collection was last built with)."""
-    import sqlalchemy as sa
-
-    from photoshape_flow.db import models as m
-
-    row = session.execute(sa.select(m.PipelineRun).order_by(m.PipelineRun.id.desc()).limit(1)).scalar_one_or_none()
-    if row is None:
-        return None
-    return resolve_profile(row.profile_name, dict(row.overrides or {}))
-
-
 # -- the fan-out path --------------------------------------------------------------------------------
 def plan_batches(name: str, profile: str | Profile | ResolvedProfile, ctx: StageContext,
                  batch_size: int | None = None) -> list[WorkUnit]:

@@ -1,0 +1,23 @@
+"""What the `pipeline_run` table says about past runs (the stages record them; readers live here).
+
+The newest run's resolved profile is what the collection was last built with: `photoshape status`
+counts pending work by it, and re-runs can default to it.
+"""
+
+from __future__ import annotations
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.db import models as m
+from photoshape_flow.profiles import ResolvedProfile, resolve_profile
+
+
+def last_run(session: Session) -> m.PipelineRun | None:
+    return session.execute(sa.select(m.PipelineRun).order_by(m.PipelineRun.id.desc()).limit(1)).scalar_one_or_none()
+
+
+def last_run_profile(session: Session) -> ResolvedProfile | None:
+    """The profile of the newest recorded run, with its overrides (None before the first run)."""
+    row = last_run(session)
+    return None if row is None else resolve_profile(row.profile_name, dict(row.overrides or {}))
