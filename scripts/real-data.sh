@@ -30,13 +30,14 @@ generate_demo(Path('$DEMO'), size='small')"
 fi
 
 $PS db upgrade
-$PS ingest envmaps "$SHARED/envmaps" "$DEMO/envmaps"
-$PS ingest materials "$SHARED/materials" "$DEMO/materials"
-$PS ingest shapes "$SHARED/models/sweethome3d" --license GPL-2.0-or-later \
+# rejected inputs are reported; --allow-rejected lets the script go on with what was accepted
+$PS ingest envmaps "$SHARED/envmaps" "$DEMO/envmaps" --allow-rejected
+$PS ingest materials "$SHARED/materials" "$DEMO/materials" --allow-rejected
+$PS ingest shapes "$SHARED/models/sweethome3d" --allow-rejected --license GPL-2.0-or-later \
   --attribution "Sweet Home 3D default furniture catalog, eTeks (Emmanuel Puybaret)"
-$PS ingest shapes "$SHARED"/models/polyhaven_* --license CC0-1.0 --attribution "Poly Haven (polyhaven.com)"
-[ -d "$SH3D" ] && $PS ingest shapes "$SH3D" --category chair,sofa,stool,bench  # catalogs carry their licences
-$PS ingest exemplars "$SHARED/photos/abo" --category chair --source abo \
+$PS ingest shapes "$SHARED"/models/polyhaven_* --allow-rejected --license CC0-1.0 --attribution "Poly Haven (polyhaven.com)"
+[ -d "$SH3D" ] && $PS ingest shapes "$SH3D" --allow-rejected --category chair,sofa,stool,bench  # catalogs carry their licences
+$PS ingest exemplars "$SHARED/photos/abo" --allow-rejected --category chair --source abo \
   --license CC-BY-4.0 --attribution "Amazon Berkeley Objects, (c) Amazon.com, CC BY 4.0" \
   --source-url https://amazon-berkeley-objects.s3.amazonaws.com/index.html
 for stage in coarse-alignment fine-alignment substances training-renders training inference publish; do
