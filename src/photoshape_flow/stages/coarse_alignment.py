@@ -6,7 +6,6 @@ searches all descriptors and rewrites the pairs of the shapes whose neighbours c
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import sqlalchemy as sa
@@ -27,7 +26,7 @@ def _config(cfg: CoarseAlignmentConfig) -> Any:
 
 def _features_report(part: str, counts: dict[str, Any]) -> StageReport:
     return StageReport(NAME, done=int(counts["computed"]), skipped=int(counts["skipped"]),
-                       failed=int(counts["failed"]), seconds=float(counts.get("seconds") or 0.0),
+                       failed=int(counts["failed"]),
                        details={part: {k: v for k, v in counts.items() if k != "errors"}})
 
 
@@ -49,13 +48,11 @@ def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = N
 
     config = _config(cfg)
     if work is None:
-        start = time.perf_counter()
         report = _features_report("shapes", coarse.compute_view_features(
             config=config, settings=ctx.settings, renderer=ctx.renderer))
         report = report.merge(_features_report("exemplars", coarse.compute_exemplar_features(
             config=config, settings=ctx.settings)))
         report = report.merge(finish(ctx, cfg))
-        report.seconds = time.perf_counter() - start
         return report
     if work.part == "shapes":
         counts = coarse.compute_view_features(list(work.ids), config=config, settings=ctx.settings,
@@ -71,6 +68,5 @@ def finish(ctx: StageContext, cfg: CoarseAlignmentConfig) -> StageReport:
     """Exact retrieval over all descriptors, inverted into per-shape pairs."""
     from photoshape_flow.pipeline.coarse_alignment import compute_pairs
 
-    start = time.perf_counter()
     pairs = compute_pairs(config=_config(cfg), settings=ctx.settings)
-    return StageReport(NAME, seconds=time.perf_counter() - start, details={"pairs": pairs})
+    return StageReport(NAME, details={"pairs": pairs})

@@ -7,9 +7,8 @@ configured Prefect API, a flow updates progress artifacts, a test records what w
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
@@ -17,10 +16,11 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.events import NO_EVENTS, EventSink
+from photoshape_flow.pipeline.ingest_common import Progress
 from photoshape_flow.store import BlobStore
 
-# (label of the item just finished, items done, items in all): the signature ingest already reports
-ProgressSink = Callable[[str, int, int], None]
+# progress(label of the item just finished, items done, items in all): the callback ingest reports to
+ProgressSink = Progress
 
 
 def no_progress(label: str, done: int, total: int) -> None:
@@ -35,7 +35,6 @@ class StageContext:
     progress: ProgressSink = no_progress
     events: EventSink = NO_EVENTS
     renderer: Any = None  # None: each stage makes its own (tests inject a shared or fake one)
-    extras: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def create(cls, settings: Settings | None = None, **kwargs: Any) -> StageContext:
@@ -59,8 +58,3 @@ class StageContext:
     def device(self) -> str:
         """The configured torch device name ("auto", "cpu", "cuda"); trainers resolve it."""
         return self.settings.device
-
-
-def iter_batches(ids: list[int], size: int) -> Iterator[list[int]]:
-    for start in range(0, len(ids), max(size, 1)):
-        yield ids[start : start + size]

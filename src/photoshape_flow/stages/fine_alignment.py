@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import FineAlignmentConfig
 from photoshape_flow.stages.context import StageContext
@@ -24,9 +22,8 @@ def run(ctx: StageContext, cfg: FineAlignmentConfig, work: WorkUnit | None = Non
     from photoshape_flow.align.fine import FineParams
     from photoshape_flow.pipeline.fine_alignment import run_fine_alignment
 
-    start = time.perf_counter()
     summary = run_fine_alignment(None if work is None else list(work.ids), ctx.settings,
                                  params=FineParams(size=cfg.size), renderer=ctx.renderer)
     return StageReport(NAME, done=int(summary["aligned"]), skipped=int(summary["up_to_date"]),
-                       failed=int(summary["failed"]), seconds=time.perf_counter() - start,
+                       failed=int(summary["failed"]),
                        details={"failures": summary.get("failures", [])[:20]})

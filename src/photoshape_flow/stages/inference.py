@@ -7,7 +7,6 @@ classifier, keyed by the pair's own hash), so the generic batch claim is skipped
 from __future__ import annotations
 
 import logging
-import time
 
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import InferenceConfig
@@ -44,11 +43,9 @@ def plan(ctx: StageContext, cfg: InferenceConfig) -> list[WorkUnit]:
 
 def run(ctx: StageContext, cfg: InferenceConfig, work: WorkUnit | None = None) -> StageReport:
     if work is None:
-        start = time.perf_counter()
         report = StageReport(NAME)
         for method in methods_to_run(ctx, cfg):
             report = report.merge(_run_method(ctx, cfg, method, None))
-        report.seconds = time.perf_counter() - start
         return report
     return _run_method(ctx, cfg, work.part, list(work.ids))
 
@@ -56,11 +53,9 @@ def run(ctx: StageContext, cfg: InferenceConfig, work: WorkUnit | None = None) -
 def _run_method(ctx: StageContext, cfg: InferenceConfig, method: str, pair_ids: list[int] | None) -> StageReport:
     from photoshape_flow.pipeline.inference import run_inference
 
-    start = time.perf_counter()
     summary = run_inference(method, pair_ids=pair_ids, top_k=cfg.top_k, settings=ctx.settings)
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
-        seconds=time.perf_counter() - start,
         details={summary.method_key: {"pairs": summary.pairs_done, "rows": summary.rows,
                                       "failed": summary.pairs_failed[:20]}},
     )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +36,6 @@ def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None)
     roots = request.roots
     if roots is None:
         roots = {name: [inbox(ctx) / name] for name in COLLECTIONS if (inbox(ctx) / name).is_dir()}
-    start = time.perf_counter()
     report = StageReport("ingest")
     for name in COLLECTIONS:
         paths = [Path(p) for p in roots.get(name, [])]
@@ -62,5 +60,4 @@ def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None)
                             "replaced": len(summary.replaced),
                             "rejected": [f"{path}: {reason}" for path, reason in summary.rejected]}},
         ))
-    report.seconds = time.perf_counter() - start
     return report

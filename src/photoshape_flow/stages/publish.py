@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -33,15 +32,13 @@ def plan(ctx: StageContext, cfg: PublishConfig) -> list[WorkUnit]:
 def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline.publish import run_publish
 
-    start = time.perf_counter()
     ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
     summary = run_publish(ids, None, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
                           formats=cfg.formats)
     report = StageReport(NAME, done=summary.rendered, skipped=summary.skipped, failed=summary.failed,
-                         seconds=time.perf_counter() - start, details={"publish": summary.as_dict()})
+                         details={"publish": summary.as_dict()})
     if work is None:
         report = report.merge(finish(ctx, cfg))
-        report.seconds = time.perf_counter() - start
     return report
 
 
@@ -49,6 +46,5 @@ def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far."""
     from photoshape_flow.pipeline.gallery_site import write_gallery_site
 
-    start = time.perf_counter()
     index = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
-    return StageReport(NAME, seconds=time.perf_counter() - start, details={"gallery": str(index)})
+    return StageReport(NAME, details={"gallery": str(index)})

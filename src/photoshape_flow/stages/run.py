@@ -29,15 +29,21 @@ def _resolved(profile: str | Profile | ResolvedProfile) -> ResolvedProfile:
     return profile if isinstance(profile, ResolvedProfile) else resolve_profile(profile)
 
 
+def _timed(call: Callable[[], StageReport]) -> StageReport:
+    """The report of `call` with its wall time: the one place a stage's seconds are measured."""
+    start = time.perf_counter()
+    report = call()
+    report.seconds = time.perf_counter() - start
+    return report
+
+
 def run_stage(name: str, profile: str | Profile | ResolvedProfile, ctx: StageContext,
               work: Any = None) -> StageReport:
     """One stage with its section of the profile; `work` limits it to a unit (or an ingest request)."""
     stage = get_stage(name)
     resolved = _resolved(profile)
     log.info("stage %s (profile %s) starting", name, resolved.name)
-    start = time.perf_counter()
-    report = stage.run(ctx, stage.config(resolved.profile), work)
-    report.seconds = time.perf_counter() - start
+    report = _timed(lambda: stage.run(ctx, stage.config(resolved.profile), work))
     log.info("stage %s finished in %.1f s: %d done, %d skipped, %d failed, %d rejected", name, report.seconds,
              report.done, report.skipped, report.failed, report.rejected)
     return report
@@ -111,7 +117,7 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
     stage = get_stage(name)
     cfg = stage.config(_resolved(profile).profile)
     if stage.claims_itself:
-        return stage.run(ctx, cfg, unit)
+        return _timed(lambda: stage.run(ctx, cfg, unit))
     claim_stage = f"{name}:{unit.part}"
     digest = claim_hash(name, unit.part, cfg)
     with ctx.session() as session:
@@ -121,7 +127,7 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
     if not mine:
         return StageReport(name, skipped=len(unit.ids))
     try:
-        report = stage.run(ctx, cfg, WorkUnit(unit.part, mine))
+        report = _timed(lambda: stage.run(ctx, cfg, WorkUnit(unit.part, mine)))
     except Exception as exc:
         with ctx.session() as session:
             for key in won:
@@ -138,7 +144,8 @@ def finish(name: str, profile: str | Profile | ResolvedProfile, ctx: StageContex
     stage = get_stage(name)
     if stage.finish is None:
         return None
-    return stage.finish(ctx, stage.config(_resolved(profile).profile))
+    finish_step = stage.finish
+    return _timed(lambda: finish_step(ctx, stage.config(_resolved(profile).profile)))
 
 
 def stage_progress(session: Session) -> list[StageProgress]:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 from photoshape_flow.profiles import SubstancesConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -14,14 +12,12 @@ NAME = "substances"
 def run(ctx: StageContext, cfg: SubstancesConfig, work: None = None) -> StageReport:
     from photoshape_flow.pipeline.substances import run_substances
 
-    start = time.perf_counter()
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
                              train_config=cfg.network)
     parts = summary["part_substances"]
     renders = summary["bootstrap"]
     return StageReport(
         NAME, done=int(parts["updated"]), skipped=int(parts["skipped"]), failed=int(parts["failed"]),
-        seconds=time.perf_counter() - start,
         details={"bootstrap": {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")},
                  "network": summary["network"], "parts": parts["parts"], "unobserved": parts["unobserved"]},
     )

@@ -7,8 +7,6 @@ temperature needs the training round's validation renders and inference must onl
 
 from __future__ import annotations
 
-import time
-
 from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -21,7 +19,6 @@ def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageRep
     from photoshape_flow.pipeline.calibration import calibrate
     from photoshape_flow.pipeline.training import run_training
 
-    start = time.perf_counter()
     classifier_id = run_training(cfg, settings=ctx.settings)
     calibration = calibrate(ctx.settings, classifier_id)
     with ctx.session() as session:
@@ -29,4 +26,4 @@ def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageRep
         assert clf is not None
         details = {"classifier_id": classifier_id, "name": clf.name, "status": clf.status, "metrics": clf.metrics,
                    "calibration": calibration}
-    return StageReport(NAME, done=1, seconds=time.perf_counter() - start, details=details)
+    return StageReport(NAME, done=1, details=details)

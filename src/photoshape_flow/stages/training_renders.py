@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 from photoshape_flow.profiles import TrainingRendersConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -14,10 +12,9 @@ NAME = "training-renders"
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: None = None) -> StageReport:
     from photoshape_flow.pipeline.training_renders import run_training_renders
 
-    start = time.perf_counter()
     summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer)
     return StageReport(
         NAME, done=int(summary["rendered"]), skipped=int(summary["skipped"]), failed=int(summary["failed"]),
-        rejected=int(summary["rejected"]), seconds=time.perf_counter() - start,
+        rejected=int(summary["rejected"]),
         details={"requested": summary["requested"], "splits": summary["splits"]},
     )
