@@ -36,7 +36,6 @@ log = logging.getLogger(__name__)
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
 
 
-
 def fit_classifier_color_sigma(
     session: Session, store: BlobStore, material_labs: dict[int, np.ndarray],
     classifier: m.Classifier | None = None,
@@ -51,7 +50,7 @@ def fit_classifier_color_sigma(
 
     data = training_data(session, store)
     key = stable_hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
-                 "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
+                       "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
     metrics = dict(classifier.metrics or {}) if classifier is not None else {}
     if classifier is not None and metrics.get("color_sigma_key") == key:
         cached = metrics.get("color_sigma")
@@ -64,17 +63,10 @@ def fit_classifier_color_sigma(
     return sigma
 
 
-def color_prior_for(
-    session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier | None = None
-) -> tuple[np.ndarray, float] | None:
-    """(material colours in `materials` order, sigma) for the colour likelihood, None without data.
-
-    `classifier`: the material classifier the sigma is cached on (`fit_classifier_color_sigma`).
-    """
+def material_labs(session: Session, store: BlobStore, materials: Sequence[int]) -> dict[int, np.ndarray]:
+    """Median CIELAB colour of each of `materials` that has one (`material_lab`)."""
     rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
-    labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
-    sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
-    return (material_lab_matrix(materials, labs), sigma) if sigma is not None else None
+    return {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
 
 
 def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
@@ -96,8 +88,6 @@ def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
     return None
 
 
-
-
 def stored_color_prior(
     session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier
 ) -> tuple[np.ndarray, float] | None:
@@ -105,8 +95,7 @@ def stored_color_prior(
     sigma = (classifier.metrics or {}).get("color_sigma")
     if sigma is None:
         return None
-    rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
-    labs = {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
+    labs = material_labs(session, store, materials)
     return (material_lab_matrix(materials, labs), float(sigma)) if labs else None
 
 
@@ -133,7 +122,8 @@ def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
         classifier = session.get(m.Classifier, classifier_id)
         if classifier is None:
             raise LookupError(f"no classifier with id {classifier_id}")
-        prior = color_prior_for(session, store, [int(x) for x in classifier.materials if int(x) != 0], classifier)
+        labs = material_labs(session, store, [int(x) for x in classifier.materials if int(x) != 0])
+        sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
         networks = substance_networks(session)
     temperatures = {str(n): substance_temperature(settings, n) for n in networks}
-    return {"color_sigma": None if prior is None else prior[1], "substance_temperatures": temperatures}
+    return {"color_sigma": sigma, "substance_temperatures": temperatures}

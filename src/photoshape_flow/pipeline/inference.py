@@ -143,7 +143,6 @@ def pending_pairs(session: Session, method_key: str, expected: dict[int, str]) -
     return [pair_id for pair_id, digest in sorted(expected.items()) if stored.get(pair_id) != digest]
 
 
-
 class _Context:
     """What one inference run needs once: materials, their colours, the classifier."""
 
@@ -190,8 +189,8 @@ class _Context:
             if prior is not None:
                 self.model_labs, self.color_sigma = prior
             else:
-                log.warning("classifier %s has no colour calibration (run the training stage): ranking without "
-                            "the colour likelihood", classifier.id)
+                log.warning("classifier %s: no stored colour sigma (the training stage fits it) or no material "
+                            "colours: ranking without the colour likelihood", classifier.id)
         # part-level temperature of each substance network whose rows weight the ranking (fit by training)
         self.substance_temperatures: dict[int, float | None] = {}
         if method == "classifier" and calibrate_substances:

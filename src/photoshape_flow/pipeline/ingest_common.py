@@ -33,7 +33,6 @@ Progress = Callable[[str, int, int], None]
 """progress(label, done, total): called after each item (label names the item just handled)."""
 
 
-
 @dataclass
 class IngestSummary:
     """What one ingest call did. Ids are row ids of the collection's table."""

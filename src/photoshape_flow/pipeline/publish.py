@@ -62,7 +62,6 @@ log = logging.getLogger(__name__)
 FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
 
 
-
 def item_seed(global_seed: int, kind: str, key: str) -> int:
     """A render seed derived from the global seed and the item's natural key."""
     return int.from_bytes(hashlib.sha256(f"{global_seed}/{kind}/{key}".encode()).digest()[:4], "little") >> 1
