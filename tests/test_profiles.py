@@ -56,3 +56,14 @@ def test_bad_overrides_fail_with_one_line_naming_the_path(override: str, message
 def test_unknown_profile_names_the_choices() -> None:
     with pytest.raises(ProfileError, match="tiny, small, medium, default, paper"):
         resolve_profile("huge")
+
+
+def test_profiles_and_the_cli_load_without_torch() -> None:
+    """Profiles nest the training configs, yet `photoshape --help` must not pay torch's import (~1.4 s)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, photoshape_flow.profiles, photoshape_flow.cli;"
+            "print('torch' in sys.modules, 'photoshape_flow.stages' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]

@@ -10,7 +10,7 @@ import pytest
 import torch
 from tests.classify.regiondata import TOY_MATERIALS, substance_of, write_renders
 
-from photoshape_flow.classify.augment import AugmentConfig
+from photoshape_flow.classify.configs import AugmentConfig
 from photoshape_flow.classify.dataset import RegionDataset, RenderItem, find_regions, frame_object, make_input
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 

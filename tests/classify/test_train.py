@@ -12,8 +12,7 @@ from torch import nn
 
 from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify import train as train_module
-from photoshape_flow.classify.augment import AugmentConfig
-from photoshape_flow.classify.configs import get_config
+from photoshape_flow.classify.configs import AugmentConfig, get_config
 from photoshape_flow.classify.dataset import RegionDataset, find_regions
 from photoshape_flow.classify.resnet import build_model
 from photoshape_flow.classify.train import (

@@ -20,28 +20,11 @@ epoch's augmentations are reproducible and a resumed training run sees the same 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 
-
-@dataclass(frozen=True)
-class AugmentConfig:
-    """Ranges of the random augmentations (defaults near the original code's torchvision settings)."""
-
-    enabled: bool = True
-    rotation_deg: float = 10.0
-    crop_scale: tuple[float, float] = (0.5, 1.0)
-    aspect_ratio: tuple[float, float] = (3 / 4, 4 / 3)
-    hflip: bool = True
-    brightness: float = 0.2
-    contrast: float = 0.2
-    saturation: float = 0.2
-    hue: float = 0.05  # fraction of a full turn of the hue circle
-    blur: float = 0.0  # maximum Gaussian sigma in source pixels (0: off, as in the paper)
-    min_mask_kept: float = 0.25
-    max_tries: int = 4
+from photoshape_flow.classify.configs import AugmentConfig
 
 
 def _uniform(generator: torch.Generator, low: float, high: float) -> float:

@@ -37,7 +37,24 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from photoshape_flow.classify.augment import AugmentConfig
+
+@dataclass(frozen=True)
+class AugmentConfig:
+    """Ranges of the random augmentations of `classify.augment` (defaults near the original code's
+    torchvision settings); here, beside the classifier configs, so profiles load without torch."""
+
+    enabled: bool = True
+    rotation_deg: float = 10.0
+    crop_scale: tuple[float, float] = (0.5, 1.0)
+    aspect_ratio: tuple[float, float] = (3 / 4, 4 / 3)
+    hflip: bool = True
+    brightness: float = 0.2
+    contrast: float = 0.2
+    saturation: float = 0.2
+    hue: float = 0.05  # fraction of a full turn of the hue circle
+    blur: float = 0.0  # maximum Gaussian sigma in source pixels (0: off, as in the paper)
+    min_mask_kept: float = 0.25
+    max_tries: int = 4
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from photoshape_flow.classify.augment import AugmentConfig, augment, resize
+from photoshape_flow.classify.augment import augment, resize
+from photoshape_flow.classify.configs import AugmentConfig
 from photoshape_flow.imaging.squares import crop_square, square_box
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.table import Table
 
 from photoshape_flow.cli.common import console, fail, require_database, resolve_profile_or_fail, setup_logging
 from photoshape_flow.profiles import PROFILES
-from photoshape_flow.stages import STAGE_NAMES, StageReport
+
+if TYPE_CHECKING:  # the registry imports the ORM: loaded when a command runs, not for every `photoshape`
+    from photoshape_flow.stages import StageReport
 
 
 def print_reports(reports: Sequence[StageReport], title: str = "stages run") -> None:
@@ -37,7 +39,8 @@ def profile_fields(data: dict[str, Any], prefix: str = "") -> list[tuple[str, An
 
 
 def run(
-    stage: str = typer.Argument(..., help=f"One of: {', '.join(STAGE_NAMES)}, or 'all'."),
+    stage: str = typer.Argument(..., help="A stage, in pipeline order: ingest, coarse-alignment, ... publish "
+                                "(`photoshape status` lists them all), or 'all'."),
     profile: str = typer.Option("default", "--profile", "-p", help=" | ".join(PROFILES)),
     overrides: list[str] = typer.Option(None, "--set", help="Override a profile field, e.g. training.epochs=3 "
                                         "(repeatable; --show-profile lists the fields)."),
@@ -46,7 +49,7 @@ def run(
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
     from photoshape_flow.cli.common import stage_context
-    from photoshape_flow.stages import run_all
+    from photoshape_flow.stages import STAGE_NAMES, run_all
 
     setup_logging(verbose)
     if stage != "all" and stage not in STAGE_NAMES:
