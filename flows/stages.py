@@ -24,14 +24,14 @@ ProfileName = Literal["tiny", "small", "medium", "default", "paper"]
 def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> dict[str, Any]:
     """Map `process_batch` over the stage's units, tracking progress in an artifact, then finish."""
     units = plan_batches(stage, profile, overrides, batch_size)
-    totals: dict[str, Any] = {"batches": len(units), "items": 0, "done": 0, "skipped": 0, "failed": 0}
+    totals: dict[str, Any] = {"batches": len(units), "items": 0, "done": 0, "skipped": 0, "failed": 0, "rejected": 0}
     if units:
         progress = Progress(stage, len(units))
         futures = [process_batch.submit(stage, u["part"], u["ids"], profile, overrides, len(u["ids"]))
                    for u in units]
         for future in as_completed(futures):
             report = future.result()
-            for key in ("done", "skipped", "failed"):
+            for key in ("done", "skipped", "failed", "rejected"):
                 totals[key] += report[key]
             progress.step()
         totals["items"] = sum(len(u["ids"]) for u in units)
