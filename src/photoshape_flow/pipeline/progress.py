@@ -15,7 +15,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
-from photoshape_flow.pipeline.runs import last_run
+from photoshape_flow.pipeline.runs import last_run, run_profile
 from photoshape_flow.profiles import ResolvedProfile, resolve_profile
 from photoshape_flow.vocab import STATUS_OK, STATUS_REJECTED
 
@@ -51,7 +51,7 @@ def assumed_profile(session: Session) -> AssumedProfile:
     row = last_run(session)
     if row is None:
         return AssumedProfile(resolve_profile("default"), None)
-    return AssumedProfile(resolve_profile(row.profile_name, dict(row.overrides or {})), int(row.id))
+    return AssumedProfile(run_profile(row), int(row.id))
 
 
 def _count(session: Session, query: sa.Select) -> int:

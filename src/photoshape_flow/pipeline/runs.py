@@ -17,7 +17,12 @@ def last_run(session: Session) -> m.PipelineRun | None:
     return session.execute(sa.select(m.PipelineRun).order_by(m.PipelineRun.id.desc()).limit(1)).scalar_one_or_none()
 
 
+def run_profile(row: m.PipelineRun) -> ResolvedProfile:
+    """The resolved profile a recorded run used: its profile name with its overrides re-applied."""
+    return resolve_profile(row.profile_name, dict(row.overrides or {}))
+
+
 def last_run_profile(session: Session) -> ResolvedProfile | None:
     """The profile of the newest recorded run, with its overrides (None before the first run)."""
     row = last_run(session)
-    return None if row is None else resolve_profile(row.profile_name, dict(row.overrides or {}))
+    return None if row is None else run_profile(row)
