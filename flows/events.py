@@ -95,3 +95,12 @@ class PrefectEvents:
             return False
         logger.info("emitted %s (%d materials)", MATERIAL_EVENT, len(material_ids))
         return True
+
+
+def stage_context(settings: Settings | None = None) -> Any:
+    """The stage context of the CLI and of the flows: the settings, and events sent to Prefect."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.stages import StageContext
+
+    settings = settings or get_settings()
+    return StageContext.create(settings, events=PrefectEvents(settings))

@@ -21,14 +21,14 @@ def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName
 
     The resolved profile and each stage's counts are recorded in `pipeline_run`, as `photoshape run` does.
     """
-    from photoshape_flow.flows.tasks import flow_context
+    from photoshape_flow.flows.events import stage_context
 
     from photoshape_flow.profiles import resolve_profile
     from photoshape_flow.stages import StageReport
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
     wanted = [name for name in STAGE_NAMES if name in set(stages or STAGE_NAMES)]
-    ctx = flow_context()
+    ctx = stage_context()
     run_id = start_run(ctx, resolve_profile(profile, overrides or []), wanted, origin="flow")
     results: dict[str, Any] = {}
     times: dict[str, float] = {}

@@ -16,9 +16,10 @@ from photoshape_flow.flows.tasks import finish_stage, plan_batches, process_batc
 from prefect import Flow, flow
 from prefect.futures import as_completed
 
+from photoshape_flow.profiles import PROFILES
 from photoshape_flow.stages import REGISTRY, Stage
 
-ProfileName = Literal["tiny", "small", "medium", "default", "paper"]
+ProfileName = Literal[tuple(PROFILES)]  # type: ignore[valid-type]  # the profile table's names
 
 
 def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> dict[str, Any]:

@@ -46,16 +46,6 @@ def _logger() -> logging.Logger | logging.LoggerAdapter:
         return logging.getLogger("photoshape_flow.flows")
 
 
-def flow_context() -> Any:
-    """The flows' stage context: settings of this process, events to Prefect."""
-    from photoshape_flow.flows.events import PrefectEvents
-
-    from photoshape_flow.stages import StageContext
-
-    settings = get_settings()
-    return StageContext.create(settings, events=PrefectEvents(settings))
-
-
 def _profile(profile: str, overrides: list[str] | None) -> Any:
     from photoshape_flow.profiles import resolve_profile
 
@@ -67,7 +57,7 @@ def plan_batches(stage: str, profile: str, overrides: list[str] | None, batch_si
     """Units of work of a fanning-out stage, as {part, ids} dicts."""
     from photoshape_flow.stages import plan_batches as plan
 
-    units = plan(stage, _profile(profile, overrides), flow_context(), batch_size)
+    units = plan(stage, _profile(profile, overrides), stage_context(), batch_size)
     _logger().info("%s: %d items in %d batches", stage, sum(len(u.ids) for u in units), len(units))
     return [{"part": u.part, "ids": list(u.ids)} for u in units]
 
@@ -78,7 +68,7 @@ def process_batch(stage: str, part: str, ids: list[int], profile: str, overrides
     """Claim the batch's items and run the stage on those won (see photoshape_flow.stages.run)."""
     from photoshape_flow.stages import WorkUnit, process
 
-    report = process(stage, WorkUnit(part, tuple(ids)), _profile(profile, overrides), flow_context())
+    report = process(stage, WorkUnit(part, tuple(ids)), _profile(profile, overrides), stage_context())
     _logger().info("%s %s: %d done, %d skipped, %d failed of %d", stage, part, report.done, report.skipped,
                    report.failed, n)
     return report.to_dict()
@@ -89,7 +79,7 @@ def finish_stage(stage: str, profile: str, overrides: list[str] | None) -> dict[
     """The stage's step after all its batches (pairs of coarse alignment, the gallery of publish)."""
     from photoshape_flow.stages import finish
 
-    report = finish(stage, _profile(profile, overrides), flow_context())
+    report = finish(stage, _profile(profile, overrides), stage_context())
     return None if report is None else report.to_dict()
 
 
@@ -99,6 +89,6 @@ def run_whole_stage(stage: str, profile: str, overrides: list[str] | None = None
     """A stage that does not fan out (its pipeline function batches and resumes internally)."""
     from photoshape_flow.stages import run_stage
 
-    report = run_stage(stage, _profile(profile, overrides), flow_context(), work)
+    report = run_stage(stage, _profile(profile, overrides), stage_context(), work)
     _logger().info("%s finished in %.1f s", stage, report.seconds)
     return report.to_dict()

@@ -60,16 +60,6 @@ def require_database() -> None:
         fail(f"{url}: not migrated; run `photoshape db upgrade`")
 
 
-def stage_context():  # type: ignore[no-untyped-def]
-    """The CLI's stage context: its settings, and events sent to the configured Prefect API."""
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.flows.events import PrefectEvents
-    from photoshape_flow.stages import StageContext
-
-    settings = get_settings()
-    return StageContext.create(settings, events=PrefectEvents(settings))
-
-
 def resolve_profile_or_fail(name: str, overrides: list[str] | None):  # type: ignore[no-untyped-def]
     """`--profile NAME --set a.b=c ...` validated, or one line naming what is wrong."""
     from photoshape_flow.profiles import ProfileError, resolve_profile

@@ -24,12 +24,12 @@ def demo(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Generate procedural shapes, SVBRDFs, studio envmaps and photo-like exemplars, then run every stage."""
-    from photoshape_flow.cli.common import stage_context
     from photoshape_flow.cli.eval_cmd import print_metrics
     from photoshape_flow.cli.run_cmd import print_reports
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import migrate
     from photoshape_flow.demo import generate_demo
+    from photoshape_flow.flows.events import stage_context
     from photoshape_flow.profiles import resolve_profile
     from photoshape_flow.stages import STAGE_NAMES, run_all
     from photoshape_flow.stages.ingest import COLLECTIONS, IngestRequest

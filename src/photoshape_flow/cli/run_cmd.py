@@ -48,7 +48,7 @@ def run(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
-    from photoshape_flow.cli.common import stage_context
+    from photoshape_flow.flows.events import stage_context
     from photoshape_flow.stages import STAGE_NAMES, run_all
 
     setup_logging(verbose)
