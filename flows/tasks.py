@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+from photoshape_flow.flows.events import stage_context
 from prefect import get_run_logger, task
 from prefect.task_runners import ThreadPoolTaskRunner
 
