@@ -65,6 +65,32 @@ def candidate_method_keys(session: Session, method: str | None, pair_ids: Sequen
     return [(pair_id, key) for pair_id, (_, key) in sorted(best.items())]
 
 
+def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]]) -> dict[tuple[int, str], str]:
+    """(pair_id, method_key) -> a stable key of the rank-1 assignment set it names.
+
+    The key changes whenever what a PhotoShape shows changes (another classifier, material, substance or
+    UV transform on any part), so "already published" and a grade can be keyed by what was shown rather
+    than by the pair alone. Pairs without rank-1 rows are absent.
+    """
+    from photoshape_flow.hashing import stable_hash
+
+    wanted = set(pairs)
+    if not wanted:
+        return {}
+    rows: dict[tuple[int, str], list[list[Any]]] = {}
+    query = (
+        sa.select(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.material_id,
+                  m.Assignment.substance, m.Assignment.classifier_id, m.Assignment.params)
+        .where(m.Assignment.rank == 1, m.Assignment.pair_id.in_(sorted({p for p, _ in wanted})))
+        .order_by(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id)
+    )
+    for pair_id, method_key, part_id, material_id, substance, classifier_id, params in session.execute(query):
+        if (pair_id, method_key) in wanted:
+            rows.setdefault((pair_id, method_key), []).append(
+                [part_id, material_id, substance, classifier_id, (params or {}).get("uv")])
+    return {key: stable_hash({"method_key": key[1], "parts": parts}) for key, parts in rows.items()}
+
+
 def choose_envmap(session: Session) -> m.Envmap | None:
     """The studio envmap every PhotoShape render uses (see the module docstring)."""
     rows = session.execute(
