@@ -39,7 +39,7 @@ def stage_deployments_yaml() -> str:
             f"    entrypoint: photoshape_flow.flows.stages.{stage.name.replace('-', '_')}",
             f"    description: {json.dumps(stage.description)}",
             "    tags: [photoshape, stage]",
-            "    parameters: {profile: default}",
+            "    parameters: {}  # profile: the one the collection was last run with",
             *(["    concurrency_limit: *single"] if stage.exclusive else []),
             "    work_pool: *pool",
             "",

@@ -1,11 +1,17 @@
-"""`photoshape-pipeline` (every stage in order) and `new-materials` (the material-added re-run)."""
+"""`photoshape-pipeline` (every stage in order) and `new-materials` (the material-added re-run).
+
+Both run the registered stage flows one after another (each fans out and claims its own work) and
+record the run and its resolved profile in `pipeline_run`, as `photoshape run` does. Without a
+`profile` they use the one the collection was last run with (`pipeline.runs.effective_profile`).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Literal
 
 from photoshape_flow.flows.artifacts import candidate_rows, publish_candidates_table, publish_summary
-from photoshape_flow.flows.stages import STAGE_FLOWS, ProfileName, timed
+from photoshape_flow.flows.stages import STAGE_FLOWS, ProfileName, effective, timed
 from photoshape_flow.flows.tasks import task_runner
 from prefect import flow, get_run_logger
 
@@ -14,54 +20,77 @@ from photoshape_flow.stages import STAGE_NAMES
 StageName = Literal[STAGE_NAMES]  # type: ignore[valid-type]
 
 
-@flow(name="photoshape-pipeline", task_runner=task_runner())
-def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName] | None = None,
-                        overrides: list[str] | None = None) -> dict[str, Any]:
-    """Run the stages in canonical order; each resumes from what earlier runs recorded (incremental).
-
-    The resolved profile and each stage's counts are recorded in `pipeline_run`, as `photoshape run` does.
-    """
+def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], origin: str
+                    ) -> tuple[dict[str, Any], dict[str, float]]:
+    """The stage flows `names` in order, recorded as one `pipeline_run`; (results, seconds) per stage."""
     from photoshape_flow.flows.events import stage_context
 
     from photoshape_flow.profiles import resolve_profile
     from photoshape_flow.stages import StageReport
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
-    wanted = [name for name in STAGE_NAMES if name in set(stages or STAGE_NAMES)]
     ctx = stage_context()
-    run_id = start_run(ctx, resolve_profile(profile, overrides or []), wanted, origin="flow")
+    run_id = start_run(ctx, resolve_profile(profile, overrides), list(names), origin=origin)
     results: dict[str, Any] = {}
     times: dict[str, float] = {}
     try:
-        for name in wanted:
+        for name in names:
             results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides)
             counts = {k: int(results[name].get(k) or 0) for k in ("done", "skipped", "failed", "rejected")}
             record_report(ctx, run_id, StageReport(name, seconds=times[name], **counts))
-            get_run_logger().info("%s: %.1f s", name, times[name])
+            get_run_logger().info("%s: %d done, %d skipped, %d failed in %.1f s", name, counts["done"],
+                                  counts["skipped"], counts["failed"], times[name])
     except BaseException as exc:
         finish_run(ctx, run_id, f"{type(exc).__name__}: {exc}")
         raise
     finish_run(ctx, run_id, None)
-    publish_summary("photoshape pipeline run", times, {"profile": profile, "overrides": overrides or []})
-    return {"seconds": times, "results": results}
+    return results, times
+
+
+@flow(name="photoshape-pipeline", task_runner=task_runner())
+def photoshape_pipeline(profile: ProfileName | None = None, stages: list[StageName] | None = None,
+                        overrides: list[str] | None = None) -> dict[str, Any]:
+    """Run the stages in canonical order; each resumes from what earlier runs recorded (incremental).
+
+    `profile` empty: the profile (and overrides) the collection was last run with, `default` at first.
+    """
+    name, sets = effective(profile, overrides)
+    wanted = [s for s in STAGE_NAMES if s in set(stages or STAGE_NAMES)]
+    results, times = run_stage_flows(name, sets, wanted, origin="flow")
+    publish_summary("photoshape pipeline run", times, {"profile": name, "overrides": sets})
+    return {"seconds": times, "results": results, "profile": name, "overrides": sets}
 
 
 @flow(name="new-materials", task_runner=task_runner())
-def new_materials(profile: ProfileName = "default", renders_per_material: int = 40) -> dict[str, Any]:
-    """Materials were added: render training data with them, fine-tune the classifier, re-infer every pair.
+def new_materials(profile: ProfileName | None = None, renders_per_material: int = 40,
+                  overrides: list[str] | None = None) -> dict[str, Any]:
+    """Materials were added: re-run every stage downstream of the material table, through publish.
 
     The new materials are found by querying the database (what the newest classifier does not know),
-    not from the triggering event, so one debounced run covers a whole bulk import.
+    not from the triggering event, so one debounced run covers a whole bulk import. Training and
+    bootstrap renders grow by `renders_per_material` per new material; publish re-renders the pairs
+    whose assignment set changed, and the gallery is rewritten.
     """
-    from photoshape_flow.pipeline.new_materials import run_new_materials
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db.session import session_scope
+    from photoshape_flow.pipeline.new_materials import plan_material_rerun
 
-    (summary, seconds) = timed(run_new_materials, profile=profile, renders_per_material=renders_per_material)
-    get_run_logger().info("new materials %s -> classifier %s (%.1f s)", summary["new_materials"],
-                          summary["classifier_id"], seconds)
-    if summary["new_materials"]:
-        rows = [r for r in candidate_rows() if r["method_key"] == f"classifier:{summary['classifier_id']}"]
-        publish_candidates_table("new-material-candidates", rows)
-        publish_summary("new materials re-run", {"new-materials": seconds},
-                        {"new materials": summary["new_materials"], "classifier": summary["classifier_id"]},
-                        key="new-materials-summary")
+    name, sets = effective(profile, overrides)
+    with session_scope(get_settings().resolved_database_url) as session:
+        rerun = plan_material_rerun(session, name, sets, renders_per_material)
+    summary: dict[str, Any] = {"new_materials": rerun.new_ids, "previous_classifier_id": rerun.previous_classifier_id,
+                               "profile": rerun.profile, "overrides": rerun.overrides, "stages": rerun.stages}
+    if not rerun.new_ids:
+        get_run_logger().info("new materials: none since classifier %s", rerun.previous_classifier_id)
+        return {**summary, "classifier_id": rerun.previous_classifier_id}
+    get_run_logger().info("new materials %s: re-running %s with profile %s %s", rerun.new_ids,
+                          ", ".join(rerun.stages), rerun.profile, rerun.overrides)
+    results, times = run_stage_flows(rerun.profile, rerun.overrides, rerun.stages, origin="new-materials")
+    classifier_id = (results.get("training") or {}).get("details", {}).get("classifier_id")
+    summary.update(classifier_id=classifier_id, results=results, seconds=times)
+    rows = [r for r in candidate_rows() if r["method_key"] == f"classifier:{classifier_id}"]
+    publish_candidates_table("new-material-candidates", rows)
+    publish_summary("new materials re-run", times,
+                    {"new materials": rerun.new_ids, "classifier": classifier_id, "profile": rerun.profile,
+                     "overrides": rerun.overrides}, key="new-materials-summary")
     return summary

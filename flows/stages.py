@@ -3,7 +3,8 @@
 Each flow is thin: a stage that fans out plans units of work, maps a claimed task over them and
 runs its finishing step; any other stage runs whole in one task. The work and its bookkeeping live
 in the stages and the pipeline. Parameters are typed so they show up as forms in the Prefect UI;
-`overrides` takes the CLI's `--set` syntax (e.g. `training.epochs=3`).
+`overrides` takes the CLI's `--set` syntax (e.g. `training.epochs=3`); without a `profile`, a flow
+uses the profile (and overrides) the collection was last run with, `default` before the first run.
 """
 
 from __future__ import annotations
@@ -20,6 +21,16 @@ from photoshape_flow.profiles import PROFILES
 from photoshape_flow.stages import REGISTRY, Stage
 
 ProfileName = Literal[tuple(PROFILES)]  # type: ignore[valid-type]  # the profile table's names
+
+
+def effective(profile: str | None, overrides: list[str] | None) -> tuple[str, list[str]]:
+    """(profile name, overrides) of a flow run: `profile=None` is the one the collection was last run with."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db.session import session_scope
+    from photoshape_flow.pipeline.runs import effective_profile
+
+    with session_scope(get_settings().resolved_database_url) as session:
+        return effective_profile(session, profile, overrides or [])
 
 
 def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> dict[str, Any]:
@@ -47,15 +58,16 @@ def _stage_flow(stage: Stage) -> Flow:
     name = stage.name
 
     if stage.fans_out:
-        def body(profile: ProfileName = "default", overrides: list[str] | None = None,
+        def body(profile: ProfileName | None = None, overrides: list[str] | None = None,
                  batch_size: int = stage.batch_size) -> dict[str, Any]:
-            result = fan_out(name, profile, overrides, batch_size)
+            result = fan_out(name, *effective(profile, overrides), batch_size)
             if name == "publish":  # what the UI shows of a publish: the candidates, best first
                 publish_candidates_table()
             return result
     else:
-        def body(profile: ProfileName = "default", overrides: list[str] | None = None) -> dict[str, Any]:  # type: ignore[misc]
-            return run_whole_stage(name, profile, overrides)
+        def body(profile: ProfileName | None = None, overrides: list[str] | None = None  # type: ignore[misc]
+                 ) -> dict[str, Any]:
+            return run_whole_stage(name, *effective(profile, overrides))
 
     body.__name__ = name.replace("-", "_")
     body.__qualname__ = body.__name__
@@ -64,7 +76,7 @@ def _stage_flow(stage: Stage) -> Flow:
 
 @flow(name="ingest", description=REGISTRY[0].description, task_runner=task_runner())
 def ingest(
-    profile: ProfileName = "default",
+    profile: ProfileName | None = None,
     shapes: list[str] | None = None,
     exemplars: list[str] | None = None,
     materials: list[str] | None = None,
@@ -77,7 +89,8 @@ def ingest(
 
     given = {"shapes": shapes, "exemplars": exemplars, "materials": materials, "envmaps": envmaps}
     roots = {k: list(v) for k, v in given.items() if v} or None
-    return run_whole_stage(stage="ingest", profile=profile, overrides=overrides,
+    name, sets = effective(profile, overrides)
+    return run_whole_stage(stage="ingest", profile=name, overrides=sets,
                            work=IngestRequest(roots=roots, source=source))
 
 

@@ -62,16 +62,23 @@ def test_interval_schedules_are_read_from_the_declarations(tmp_path: Path) -> No
 
 
 def test_flow_parameters_are_typed_for_ui_forms() -> None:
+    """Every deployment has a description and only typed, defaulted parameters, so the UI's "Quick run"
+    starts it; an empty profile means the one the collection was last run with."""
     from photoshape_flow.flows.deployments import load_flow
     from prefect.utilities.callables import parameter_schema
 
     with_profile = 0
     for spec in load_declarations():
-        schema = parameter_schema(load_flow(spec["entrypoint"]).fn).model_dump()
+        flow = load_flow(spec["entrypoint"])
+        assert (spec.get("description") or flow.description), spec["name"]
+        schema = parameter_schema(flow.fn).model_dump()
+        assert not schema.get("required"), (spec["name"], schema.get("required"))
         assert all("type" in p or "anyOf" in p or "enum" in p for p in schema["properties"].values()), spec["name"]
         if "profile" in schema["properties"]:
             with_profile += 1
-            assert schema["properties"]["profile"]["enum"] == ["tiny", "small", "medium", "default", "paper"]
+            choice = schema["properties"]["profile"]
+            assert choice["default"] is None and "profile" not in (spec.get("parameters") or {}), spec["name"]
+            assert [c.get("enum") for c in choice["anyOf"]][0] == ["tiny", "small", "medium", "default", "paper"]
     assert with_profile >= len(STAGES) + 2
 
 

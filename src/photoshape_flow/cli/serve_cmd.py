@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 from photoshape_flow.cli.common import console, fail
@@ -13,6 +15,8 @@ def serve(
     list_only: bool = typer.Option(False, "--list", help="Print the deployments and exit."),
     write_yaml: bool = typer.Option(False, "--write-yaml", help="Rewrite prefect.yaml's stage deployments from "
                                     "the stage registry and exit."),
+    declarations: Path | None = typer.Option(None, "--declarations", help="Serve the deployments of this "
+                                             "prefect.yaml instead of the project's (e.g. with other schedules)."),
 ) -> None:
     """Serve every deployment of prefect.yaml (schedules, the material-added trigger) until Ctrl-C.
 
@@ -28,16 +32,18 @@ def serve(
         console.print("prefect.yaml: stage deployments " + ("rewritten" if changed else "already up to date"))
         return
     if list_only:
-        for spec in load_declarations():
+        for spec in load_declarations(declarations):
             if not names or spec["name"] in names:
                 console.print(f"{spec['name']:18} {spec['entrypoint']}", highlight=False)
         return
     if not get_settings().effective_prefect_api_url:
         fail("no Prefect API configured: start `prefect server start` and export "
              "PREFECT_API_URL=http://127.0.0.1:4200/api")
-    deployments = build_deployments(names=names or None)
+    if declarations is not None and not declarations.is_file():
+        fail(f"{declarations}: no such file")
+    deployments = build_deployments(declarations, names=names or None)
     console.print(f"serving {len(deployments)} deployments: {', '.join(d.name for d in deployments)}")
-    serve_deployments(names or None, limit=limit)
+    serve_deployments(names or None, limit=limit, path=declarations)
 
 
 def register(app: typer.Typer) -> None:

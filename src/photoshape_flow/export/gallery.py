@@ -70,6 +70,7 @@ class GalleryEntry:
     grader: str | None = None
     downloads: dict[str, Path] = field(default_factory=dict)  # format -> file (or folder: zipped)
     licenses: list[Mapping[str, Any]] = field(default_factory=list)  # role, name, license, attribution, url
+    assignment_set: str | None = None  # the assignment-set key the renders show (publish records it)
 
     @property
     def slug(self) -> str:

@@ -56,11 +56,12 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
         ]
         used.update(p.material_id for p in parts if p.material_id is not None)
         renders = session.execute(
-            sa.select(m.Rendering.key, m.Rendering.blobs).where(
+            sa.select(m.Rendering.key, m.Rendering.blobs, m.Rendering.params).where(
                 m.Rendering.kind == "photoshape", m.Rendering.key.like(f"{pair_id}/{method_key}/%"),
                 m.Rendering.status == STATUS_OK)
         ).all()
-        views = sorted(((key.rsplit("/", 1)[-1], blob_path((blobs or {}).get("srgb"))) for key, blobs in renders),
+        shown = {(params or {}).get("assignment_set") for key, _, params in renders if key.endswith("/exemplar")}
+        views = sorted(((key.rsplit("/", 1)[-1], blob_path((blobs or {}).get("srgb"))) for key, blobs, _ in renders),
                        key=lambda v: (v[0] != "exemplar", v[0]))
         builtin = session.execute(
             sa.select(m.Rendering.blobs).where(m.Rendering.kind == "builtin", m.Rendering.key == f"{pair_id}/exemplar",
@@ -88,6 +89,7 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
             hog_distance=pair.distance, alignment_iou=iou,
             grade=grade.label if grade else None, grade_note=grade.note if grade else None,
             grader=grade.grader if grade else None, downloads=downloads,
+            assignment_set=next(iter(shown - {None}), None),
             licenses=[{k: getattr(p, k) for k in ("role", "name", "license", "attribution", "source_url")}
                       for p in licences],
         ))

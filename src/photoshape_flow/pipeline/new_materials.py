@@ -1,23 +1,29 @@
-"""The "new materials" re-run: when materials are added, extend the training set, fine-tune, re-infer.
+"""The material-added re-run: which stages to run again, and with what, when materials are added.
 
 The set of new materials is found in the database (enabled, ok materials that the newest material
 classifier does not know), never from an event's payload, so a debounced trigger after a bulk
-import — or the nightly schedule — handles every material added since the last classifier.
+import (or the nightly schedule) handles every material added since the last classifier.
+
+The stages to re-run are read off the stage registry: every stage that reads `material`, or reads
+what such a stage writes, in pipeline order (substances, training renders, training, inference,
+publish). Each keeps its own up-to-date check, so a stage whose inputs did not change skips its
+items, and publish re-renders exactly the pairs whose assignment set changed. The profile is the
+one the collection was last run with (`pipeline.runs.effective_profile`); the render counts are
+raised so that the new materials appear in the training data.
 """
 
 from __future__ import annotations
 
 import logging
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
-from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.training import material_set, newest_material_classifier
-from photoshape_flow.profiles import Profile, get_profile
+from photoshape_flow.profiles import resolve_profile
 
 log = logging.getLogger(__name__)
 
@@ -30,41 +36,54 @@ def new_material_ids(session: Session) -> list[int]:
     return sorted(current - known)
 
 
-def training_render_count(session: Session) -> int:
+def render_count(session: Session, kind: str) -> int:
     return int(session.execute(
-        sa.select(sa.func.count()).select_from(m.Rendering).where(m.Rendering.kind == "training")
+        sa.select(sa.func.count()).select_from(m.Rendering).where(m.Rendering.kind == kind)
     ).scalar_one())
 
 
-def run_new_materials(profile: str | Profile = "default", renders_per_material: int = 40,
-                      settings: Settings | None = None) -> dict[str, Any]:
-    """Render training data that includes the new materials, fine-tune the classifier, re-infer all pairs."""
-    from photoshape_flow.pipeline.calibration import calibrate
-    from photoshape_flow.pipeline.inference import run_inference
-    from photoshape_flow.pipeline.training import run_training
-    from photoshape_flow.pipeline.training_renders import run_training_renders
+def stages_downstream_of(table: str) -> list[str]:
+    """Registered stages that read `table` or read what such a stage writes, in pipeline order."""
+    from photoshape_flow.stages import REGISTRY
 
-    settings = settings or get_settings()
-    prof = get_profile(profile)
-    with session_scope(settings.resolved_database_url) as session:
-        new_ids = new_material_ids(session)
-        existing = training_render_count(session)
-        previous = newest_material_classifier(session)
-        previous_id = previous.id if previous is not None else None
+    dirty, out = {table}, []
+    for stage in REGISTRY:
+        if stage.name != "ingest" and dirty & set(stage.reads):
+            out.append(stage.name)
+            dirty |= set(stage.writes)
+    return out
+
+
+@dataclass(frozen=True)
+class MaterialRerun:
+    """What the re-run will do: the new materials, the profile (name and `--set` overrides), the stages."""
+
+    new_ids: list[int]
+    previous_classifier_id: int | None
+    profile: str
+    overrides: list[str] = field(default_factory=list)
+    stages: list[str] = field(default_factory=list)
+
+
+def plan_material_rerun(session: Session, profile: str, overrides: Sequence[str] = (),
+                        renders_per_material: int = 40) -> MaterialRerun:
+    """The re-run for the materials the newest classifier lacks (no stages when there are none).
+
+    Training and bootstrap render counts grow by `renders_per_material` per new material over what
+    exists (or the profile's count, if larger), as overrides recorded with the run.
+    """
+    new_ids = new_material_ids(session)
+    previous = newest_material_classifier(session)
+    previous_id = previous.id if previous is not None else None
     if not new_ids:
-        log.info("new materials: none since classifier %s", previous_id)
-        return {"new_materials": [], "classifier_id": previous_id}
-    renders_cfg = prof.training_renders
-    target = max(existing, renders_cfg.count) + renders_per_material * len(new_ids)
-    renders = run_training_renders("training", target, renders_cfg.size, renders_cfg.spp, settings)
-    classifier_id = run_training(prof.training, settings=settings)
-    calibrate(settings, classifier_id)
-    inference = run_inference("classifier", classifier_id=classifier_id, top_k=prof.inference.top_k,
-                              settings=settings)
-    return {
-        "new_materials": new_ids,
-        "previous_classifier_id": previous_id,
-        "classifier_id": classifier_id,
-        "training_renders": renders,
-        "inference": {"pairs": inference.pairs_done, "rows": inference.rows, "failed": len(inference.pairs_failed)},
+        return MaterialRerun([], previous_id, profile, list(overrides))
+    prof = resolve_profile(profile, list(overrides)).profile
+    extra = renders_per_material * len(new_ids)
+    counts = {
+        "training_renders.count": max(render_count(session, "training"), prof.training_renders.count) + extra,
+        "substances.bootstrap_count": max(render_count(session, "bootstrap"), prof.substances.bootstrap_count)
+        + extra,
     }
+    kept = [o for o in overrides if o.partition("=")[0].strip() not in counts]
+    return MaterialRerun(new_ids, previous_id, profile, kept + [f"{k}={v}" for k, v in counts.items()],
+                         stages_downstream_of("material"))

@@ -49,6 +49,7 @@ from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.photoshapes import (
     DEFAULT_METHOD,
     PhotoShape,
+    assignment_set_keys,
     candidate_method_keys,
     choose_envmap,
     load_photoshape,
@@ -117,6 +118,7 @@ def run_publish(
     summary = PublishSummary(method=method or DEFAULT_METHOD)
     with session_scope(url) as session:
         todo = candidate_method_keys(session, method, pair_ids)
+        shown = assignment_set_keys(session, todo)
         envmap_row = choose_envmap(session)
         envmap_id = envmap_row.id if envmap_row is not None else None
         summary.envmap = envmap_row.name if envmap_row is not None else None
@@ -159,6 +161,8 @@ def run_publish(
             params = {"camera": camera.to_dict(), "size": size, "spp": spp, "floor": floor, "seed": seed,
                       "method_key": method_key, "envmap": summary.envmap, "background": "white"}
             params_hash = stable_hash({**fingerprint, **params})
+            if kind == "photoshape":  # what the render shows, for the gallery and grades (not hashed: implied)
+                params = {**params, "assignment_set": shown.get((pair_id, method_key))}
             if existing[kind].get(key) == (params_hash, STATUS_OK):
                 summary.skipped += 1
                 continue

@@ -6,6 +6,9 @@ counts pending work by it, and re-runs can default to it.
 
 from __future__ import annotations
 
+import json
+from collections.abc import Sequence
+
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
@@ -26,3 +29,21 @@ def last_run_profile(session: Session) -> ResolvedProfile | None:
     """The profile of the newest recorded run, with its overrides (None before the first run)."""
     row = last_run(session)
     return None if row is None else run_profile(row)
+
+
+def effective_profile(session: Session, name: str | None, overrides: Sequence[str] = ()) -> tuple[str, list[str]]:
+    """The (profile name, overrides) a run asked for, as `--set` strings.
+
+    `name=None` means "the profile the collection was last run with" (with that run's overrides, the
+    given ones applied on top), or `default` before the first run: deployments default to it, so a
+    schedule or the material-added trigger never resizes a collection to a fixed preset.
+    """
+    if name is not None:
+        return name, list(overrides)
+    row = last_run(session)
+    if row is None:
+        return "default", list(overrides)
+    recorded = [f"{path}={value if isinstance(value, str) else json.dumps(value)}"
+                for path, value in (row.overrides or {}).items()]
+    given = {text.partition("=")[0].strip() for text in overrides}
+    return row.profile_name, [t for t in recorded if t.partition("=")[0] not in given] + list(overrides)

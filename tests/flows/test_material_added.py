@@ -1,0 +1,119 @@
+"""The material-added chain as a user meets it: a real Prefect server, `photoshape serve`, a material
+ingested with the CLI, the automation's run, and the gallery afterwards."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import sqlalchemy as sa
+import yaml
+from tests.conftest import data_root_with_inbox
+
+pytestmark = [pytest.mark.prefect, pytest.mark.slow, pytest.mark.render]
+
+PHOTOSHAPE = str(Path(sys.executable).with_name("photoshape"))
+
+
+def _new_material_runs(env: dict[str, str]) -> list:  # type: ignore[type-arg]
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import DeploymentFilter, DeploymentFilterName
+    from prefect.settings import PREFECT_API_URL, temporary_settings
+
+    async def main() -> list:  # type: ignore[type-arg]
+        async with get_client() as client:
+            deployments = await client.read_deployments(
+                deployment_filter=DeploymentFilter(name=DeploymentFilterName(any_=["new-materials"])))
+            if not deployments:
+                return []
+            return await client.read_flow_runs(deployment_filter=DeploymentFilter(id={"any_": [deployments[0].id]}))
+
+    with temporary_settings({PREFECT_API_URL: env["PREFECT_API_URL"]}):
+        return asyncio.run(main())
+
+
+def _quick_trigger(tmp_path: Path) -> Path:
+    """The project's new-materials declaration with a 2 s debounce instead of 120 s (test time only)."""
+    from photoshape_flow.flows.deployments import load_declarations
+
+    (spec,) = [d for d in load_declarations() if d["name"] == "new-materials"]
+    spec["triggers"][0].update(within=10, schedule_after=2)
+    spec["parameters"] = {**(spec.get("parameters") or {}), "renders_per_material": 6}
+    out = tmp_path / "prefect.yaml"
+    out.write_text(yaml.safe_dump({"deployments": [spec]}))
+    return out
+
+
+def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str], tiny_demo: Path,
+                                                  tmp_path: Path) -> None:
+    from tests.flows.test_pipeline_flow import recoloured_materials
+
+    data_root = data_root_with_inbox(tmp_path / "data", tiny_demo)
+    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1"}
+    env.pop("PHOTOSHAPE_DATABASE_URL", None)
+    subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=env, check=True, capture_output=True)
+    built = subprocess.run([PHOTOSHAPE, "run", "all", "--profile", "tiny"], env=env, capture_output=True, text=True)
+    assert built.returncode == 0, built.stdout[-3000:] + built.stderr[-3000:]
+
+    serve = subprocess.Popen([PHOTOSHAPE, "serve", "--declarations", str(_quick_trigger(tmp_path))], env=env,
+                             stdout=open(tmp_path / "serve.log", "w"), stderr=subprocess.STDOUT)
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and "serving 1 deployments" not in (tmp_path / "serve.log").read_text():
+            assert serve.poll() is None, (tmp_path / "serve.log").read_text()[-3000:]
+            time.sleep(0.5)
+        time.sleep(3)  # the deployment and its automation are registered once serve prints its line
+        folders = recoloured_materials(tmp_path, tiny_demo)
+        ingest = subprocess.run([PHOTOSHAPE, "ingest", "materials", *map(str, folders)], env=env,
+                                capture_output=True, text=True)
+        assert ingest.returncode == 0, ingest.stdout[-2000:] + ingest.stderr[-2000:]
+        runs: list = []  # type: ignore[type-arg]
+        deadline = time.time() + 600
+        while time.time() < deadline:
+            runs = _new_material_runs(env)
+            if runs and runs[0].state is not None and runs[0].state.is_final():
+                break
+            time.sleep(2)
+    finally:
+        serve.terminate()
+        serve.wait(timeout=60)
+    assert len(runs) == 1, (tmp_path / "serve.log").read_text()[-3000:]
+    assert runs[0].state_name == "Completed", (tmp_path / "serve.log").read_text()[-4000:]
+
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import models as m
+    from photoshape_flow.db.session import get_engine, session_scope
+    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+
+    get_settings.cache_clear()
+    get_engine.cache_clear()
+    url = f"sqlite:///{data_root / 'photoshape.db'}"
+    with session_scope(url) as session:
+        run = session.execute(sa.select(m.PipelineRun).where(m.PipelineRun.origin == "new-materials")).scalar_one()
+        new = session.execute(sa.select(m.Classifier).where(m.Classifier.kind == "material")
+                              .order_by(m.Classifier.id.desc()).limit(1)).scalar_one()
+        new_ids = session.execute(sa.select(m.Material.id).where(m.Material.name.like("new_%"))).scalars().all()
+        method_key = f"classifier:{new.id}"
+        published = session.execute(
+            sa.select(m.Rendering.pair_id, m.Rendering.params).where(
+                m.Rendering.kind == "photoshape", m.Rendering.status == "ok",
+                m.Rendering.key.like(f"%/{method_key}/exemplar"))
+        ).all()
+        keys = assignment_set_keys(session, [(pair_id, method_key) for pair_id, _ in published])
+    # the run used the profile the collection was built with, not a fixed preset, and went through publish
+    assert (run.profile_name, run.status) == ("tiny", "ok"), run.error
+    assert run.stages[-1] == "publish" and run.reports["publish"]["done"] > 0
+    assert {"training_renders.count", "substances.bootstrap_count"} <= set(run.overrides)
+    assert len(new_ids) == 2 and set(new_ids) <= set(new.materials) and new.parent_id is not None
+    assert published, "the new classifier's PhotoShapes were not rendered"
+    for pair_id, params in published:  # each affected pair's gallery page shows the re-run's assignment set
+        assert params["assignment_set"] == keys[(pair_id, method_key)]
+        page = (data_root / "gallery" / "pairs" / f"{pair_id}-{method_key.replace(':', '-')}.html").read_text()
+        assert f'data-assignment-set="{keys[(pair_id, method_key)]}"' in page, pair_id
+    get_settings.cache_clear()
+    get_engine.cache_clear()
