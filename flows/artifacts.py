@@ -78,3 +78,39 @@ class Progress:
     def step(self) -> None:
         self.done += 1
         update_progress_artifact(self.id, progress=100.0 * self.done / self.total)
+
+
+def publish_gallery_artifacts(gallery_index: str | None) -> dict[str, str]:
+    """After publish: the contact sheet as an image artifact and a link artifact to the gallery.
+
+    The sheet is written next to the gallery (`contact-sheet.png`) and shown in the UI as an inline
+    JPEG (a data URL: the Prefect UI cannot load files from the data root). Returns the keys made.
+    """
+    import base64
+    from pathlib import Path
+
+    import cv2
+    from prefect.artifacts import create_image_artifact, create_link_artifact
+
+    from photoshape_flow.pipeline.gallery_site import write_contact_sheet
+
+    made: dict[str, str] = {}
+    if gallery_index:
+        index = Path(gallery_index).resolve()
+        made["gallery"] = str(create_link_artifact(link=index.as_uri(), link_text=f"PhotoShape gallery ({index})",
+                                                   key="photoshape-gallery", description="The published gallery"))
+        try:
+            sheet = write_contact_sheet(index.parent / "contact-sheet.png")
+        except ValueError as exc:  # nothing rendered yet: no sheet to show
+            made["contact-sheet"] = f"skipped: {exc}"
+            return made
+        image = cv2.imread(str(sheet))
+        scale = min(1.0, 960 / image.shape[1])
+        small = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale < 1 else image
+        ok, jpeg = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        if ok:
+            url = "data:image/jpeg;base64," + base64.b64encode(jpeg.tobytes()).decode()
+            made["contact-sheet"] = str(create_image_artifact(
+                image_url=url, key="photoshape-contact-sheet",
+                description=f"Best PhotoShapes: exemplar, built-in, PhotoShape, novel views ({sheet})"))
+    return made

@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from typing import Any, Literal
 
-from photoshape_flow.flows.artifacts import Progress, publish_candidates_table
+from photoshape_flow.flows.artifacts import Progress, publish_candidates_table, publish_gallery_artifacts
 from photoshape_flow.flows.tasks import finish_stage, plan_batches, process_batch, run_whole_stage, task_runner
 from prefect import Flow, flow
 from prefect.futures import as_completed
@@ -25,10 +25,13 @@ ProfileName = Literal[tuple(PROFILES)]  # type: ignore[valid-type]  # the profil
 
 def effective(profile: str | None, overrides: list[str] | None) -> tuple[str, list[str]]:
     """(profile name, overrides) of a flow run: `profile=None` is the one the collection was last run with."""
+    from photoshape_flow.flows.logs import forward_project_logs
+
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.runs import effective_profile
 
+    forward_project_logs()  # every flow calls this first: its own process forwards the project's logs
     with session_scope(get_settings().resolved_database_url) as session:
         return effective_profile(session, profile, overrides or [])
 
@@ -61,8 +64,9 @@ def _stage_flow(stage: Stage) -> Flow:
         def body(profile: ProfileName | None = None, overrides: list[str] | None = None,
                  batch_size: int = stage.batch_size) -> dict[str, Any]:
             result = fan_out(name, *effective(profile, overrides), batch_size)
-            if name == "publish":  # what the UI shows of a publish: the candidates, best first
+            if name == "publish":  # what the UI shows of a publish: the candidates, the sheet, the gallery
                 publish_candidates_table()
+                publish_gallery_artifacts((result.get("finish") or {}).get("gallery"))
             return result
     else:
         def body(profile: ProfileName | None = None, overrides: list[str] | None = None  # type: ignore[misc]

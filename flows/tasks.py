@@ -13,7 +13,8 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from photoshape_flow.flows.events import stage_context
+from photoshape_flow.flows.events import stage_context as _stage_context
+from photoshape_flow.flows.logs import forward_project_logs
 from prefect import get_run_logger, task
 from prefect.task_runners import ThreadPoolTaskRunner
 
@@ -38,6 +39,12 @@ def local_cluster_kwargs(settings: Settings) -> dict[str, Any]:
     ":8787" would serve task arguments and worker logs on every interface)."""
     return {"n_workers": settings.dask_workers, "threads_per_worker": 1, "processes": True,
             "dashboard_address": settings.dask_dashboard_address}
+
+
+def stage_context() -> Any:
+    """The stage context inside a task; the project's log lines go to the task run in the UI."""
+    forward_project_logs()
+    return _stage_context()
 
 
 def _logger() -> logging.Logger | logging.LoggerAdapter:

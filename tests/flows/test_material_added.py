@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import subprocess
 import sys
 import time
@@ -32,6 +33,36 @@ def _new_material_runs(env: dict[str, str]) -> list:  # type: ignore[type-arg]
             if not deployments:
                 return []
             return await client.read_flow_runs(deployment_filter=DeploymentFilter(id={"any_": [deployments[0].id]}))
+
+    with temporary_settings({PREFECT_API_URL: env["PREFECT_API_URL"]}):
+        return asyncio.run(main())
+
+
+def _logs_and_artifacts(env: dict[str, str], since: float) -> tuple[list, list]:  # type: ignore[type-arg]
+    """Log records and artifacts of every flow run (and subflow run) that started after `since`."""
+    import datetime as dt
+
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import (
+        ArtifactFilter,
+        ArtifactFilterFlowRunId,
+        FlowRunFilter,
+        FlowRunFilterStartTime,
+        LogFilter,
+        LogFilterFlowRunId,
+    )
+    from prefect.settings import PREFECT_API_URL, temporary_settings
+
+    async def main() -> tuple[list, list]:  # type: ignore[type-arg]
+        async with get_client() as client:
+            started = dt.datetime.fromtimestamp(since, dt.UTC)
+            runs = await client.read_flow_runs(
+                flow_run_filter=FlowRunFilter(start_time=FlowRunFilterStartTime(after_=started)), limit=200)
+            ids = [r.id for r in runs]
+            logs = await client.read_logs(log_filter=LogFilter(flow_run_id=LogFilterFlowRunId(any_=ids)), limit=200)
+            artifacts = await client.read_artifacts(
+                artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=ids)), limit=200)
+            return logs, artifacts
 
     with temporary_settings({PREFECT_API_URL: env["PREFECT_API_URL"]}):
         return asyncio.run(main())
@@ -69,6 +100,7 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
             time.sleep(0.5)
         time.sleep(3)  # the deployment and its automation are registered once serve prints its line
         folders = recoloured_materials(tmp_path, tiny_demo)
+        since = time.time()
         ingest = subprocess.run([PHOTOSHAPE, "ingest", "materials", *map(str, folders)], env=env,
                                 capture_output=True, text=True)
         assert ingest.returncode == 0, ingest.stdout[-2000:] + ingest.stderr[-2000:]
@@ -84,6 +116,16 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
         serve.wait(timeout=60)
     assert len(runs) == 1, (tmp_path / "serve.log").read_text()[-3000:]
     assert runs[0].state_name == "Completed", (tmp_path / "serve.log").read_text()[-4000:]
+    # the UI shows the work: the pipeline's own log lines, the contact sheet and a link to the gallery
+    logs, artifacts = _logs_and_artifacts(env, since)
+    assert any(log.name.startswith("photoshape_flow.pipeline") for log in logs), sorted({log.name for log in logs})
+    by_key = {a.key: a for a in artifacts if a.key}
+    assert by_key["photoshape-contact-sheet"].type == "image"
+    assert str(by_key["photoshape-contact-sheet"].data).startswith("data:image/jpeg;base64,")
+    assert (data_root / "gallery" / "index.html").as_uri() in str(by_key["photoshape-gallery"].data)
+    assert {"new-materials-summary", "publish-progress"} <= set(by_key)
+    summary = str(by_key["new-materials-summary"].data)
+    assert re.search(r"\| training \| \d+\.\d \|", summary) and re.search(r"\| publish \| \d+\.\d \|", summary), summary
 
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import models as m
