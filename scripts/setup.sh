@@ -4,6 +4,7 @@
 # and docker/Dockerfile all run this script, so every environment is built the same way.
 #
 #   VENV=.venv PYTHON=python3 bash scripts/setup.sh
+#   SETUP_MODE=runtime bash scripts/setup.sh    # an image that runs the pipeline: no test tools
 #
 # Torch: `pip install torch==2.13.0` takes the local CPU wheel where the machine has one (PIP_FIND_LINKS);
 # elsewhere it is installed from the CPU index (https://download.pytorch.org/whl/cpu) so pip never
@@ -15,14 +16,18 @@ VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-python3}
 TORCH_VERSION=2.13.0
 TORCH_CPU_INDEX=${TORCH_CPU_INDEX:-https://download.pytorch.org/whl/cpu}
+SETUP_MODE=${SETUP_MODE:-dev}                 # dev: everything `make test` needs; runtime: the pipeline only
 REQUIRED_APT=(libllvm19)                      # Mitsuba llvm variant: Debian 12's libllvm15 aborts on first render
 OPTIONAL_APT=(postgresql chromium nodejs npm docker-compose sweethome3d-furniture)   # tests: PostgreSQL, gallery browser, glTF validator, compose, real shapes
+EXTRAS="[dev]"
+if [ "$SETUP_MODE" = runtime ]; then OPTIONAL_APT=(); EXTRAS=""; fi
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 
 missing_packages() {
     local pkg out=()
     for pkg in "$@"; do
+        [ -n "$pkg" ] || continue
         dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || out+=("$pkg")
     done
     echo "${out[@]:-}"
@@ -31,7 +36,7 @@ missing_packages() {
 # --- system packages -----------------------------------------------------------------------------
 if command -v dpkg-query >/dev/null 2>&1; then
     need_required=$(missing_packages "${REQUIRED_APT[@]}")
-    need_optional=$(missing_packages "${OPTIONAL_APT[@]}")
+    need_optional=$(missing_packages "${OPTIONAL_APT[@]:-}")
     # nodejs/npm may come from elsewhere (nodesource, nvm): only ask apt when the commands are missing
     if command -v node >/dev/null 2>&1; then need_optional=${need_optional//nodejs/}; fi
     if command -v npm >/dev/null 2>&1; then need_optional=${need_optional//npm/}; fi
@@ -56,7 +61,7 @@ fi
 
 # --- Python environment --------------------------------------------------------------------------
 stamp="$VENV/.setup-stamp"
-want=$(cat pyproject.toml constraints.txt scripts/setup.sh | sha256sum | cut -d' ' -f1)
+want=$( (cat pyproject.toml constraints.txt scripts/setup.sh; echo "$SETUP_MODE") | sha256sum | cut -d' ' -f1)
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
     say "python environment up to date ($VENV)"
 else
@@ -72,7 +77,7 @@ else
         fi
     fi
     say "installing photoshape_flow and pinned dependencies"
-    "${pip[@]}" install -c constraints.txt -e ".[dev]"
+    "${pip[@]}" install -c constraints.txt -e ".$EXTRAS"
     # pydensecrf2 compiles the Krahenbuhl dense CRF (~1 min); the code falls back to its own mean-field without it.
     "${pip[@]}" install -c constraints.txt "pydensecrf2==1.1" \
         || say "warning: pydensecrf2 did not build; the fallback dense CRF will be used"
@@ -81,7 +86,7 @@ fi
 
 # --- npm tools (glTF validator, headless-browser gallery test) ----------------------------------
 node_dir=src/photoshape_flow/export/node
-if [ -f "$node_dir/package-lock.json" ] && command -v npm >/dev/null 2>&1; then
+if [ "$SETUP_MODE" != runtime ] && [ -f "$node_dir/package-lock.json" ] && command -v npm >/dev/null 2>&1; then
     lock_hash=$(sha256sum "$node_dir/package-lock.json" | cut -d' ' -f1)
     if [ ! -f "$node_dir/node_modules/.lock-hash" ] || [ "$(cat "$node_dir/node_modules/.lock-hash")" != "$lock_hash" ]; then
         say "npm ci in $node_dir"

@@ -114,28 +114,38 @@ def test_dask_worker_processes_fan_out_a_stage(prefect_server: dict[str, str], t
     get_engine.cache_clear()
 
 
-def test_process_work_pool_with_two_workers_runs_deployments(prefect_server: dict[str, str], tmp_path: Path) -> None:
-    """prefect.yaml deploys as-is to a process pool; two `prefect worker` processes share the runs."""
+def compose_command(service: str) -> tuple[list[str], Path]:
+    """docker/compose.yml's command of `service` and its working directory, to run natively here."""
+    import yaml
     from tests.conftest import REPO_ROOT
+
+    spec = yaml.safe_load((REPO_ROOT / "docker/compose.yml").read_text())["services"][service]
+    command = spec["command"]
+    assert spec.get("working_dir") in (None, "/opt/photoshape/src")  # the image's source tree: the checkout here
+    return command, REPO_ROOT
+
+
+def test_compose_deploy_and_worker_commands_run_natively(prefect_server: dict[str, str], tmp_path: Path,
+                                                        pg_url: str) -> None:
+    """docker/compose.yml's `deploy` service (migrate, work pool, `prefect deploy --all`) and two of its
+    `worker` services, run natively on 127.0.0.1 against PostgreSQL: the workers pull the runs of
+    prefect.yaml's deployments from the pool and complete them."""
     from tests.pipeline.aligned import make_aligned_pairs
 
-    from photoshape_flow.db import migrate
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import make_engine
     from photoshape_flow.store import BlobStore
 
     data_root = tmp_path / "data"
-    url = f"sqlite:///{data_root / 'photoshape.db'}"
-    migrate.upgrade(url)
-    made = make_aligned_pairs(url, BlobStore(data_root / "blobs"), n_pairs=4)
-    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1"}
-    env.pop("PHOTOSHAPE_DATABASE_URL", None)
+    bin_dir = str(Path(sys.executable).parent)
+    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1",
+           "PHOTOSHAPE_DATABASE_URL": pg_url, "PATH": f"{bin_dir}:{os.environ.get('PATH', '')}"}
     prefect = str(Path(sys.executable).with_name("prefect"))
-    subprocess.run([prefect, "work-pool", "create", "photoshape", "--type", "process"], env=env, check=True,
-                   capture_output=True)
-    deployed = subprocess.run([prefect, "--no-prompt", "deploy", "--all"], env=env, cwd=REPO_ROOT,
-                              capture_output=True, text=True)
+    command, cwd = compose_command("deploy")
+    deployed = subprocess.run(command, env=env, cwd=cwd, capture_output=True, text=True)
     assert deployed.returncode == 0, deployed.stdout[-2000:] + deployed.stderr[-2000:]
+    url = pg_url
+    made = make_aligned_pairs(url, BlobStore(data_root / "blobs"), n_pairs=4)
 
     async def drop_leftovers(client):  # type: ignore[no-untyped-def]
         # runs other tests scheduled on the shared server (e.g. the debounced new-materials run) would
@@ -145,8 +155,9 @@ def test_process_work_pool_with_two_workers_runs_deployments(prefect_server: dic
                 await client.delete_flow_run(run.id)
 
     _client_call(env, drop_leftovers)
-    workers = [subprocess.Popen([prefect, "worker", "start", "--pool", "photoshape", "--name", f"w{i}"],
-                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(2)]
+    worker_command, _ = compose_command("worker")
+    workers = [subprocess.Popen([*worker_command, "--name", f"w{i}"], env=env, cwd=tmp_path,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(2)]
     try:
         run_ids: list[str] = []
         for method in ("color-match", "no-classifier"):
