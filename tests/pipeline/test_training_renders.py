@@ -120,3 +120,32 @@ def test_a_failing_item_is_recorded_and_retried(db_url: str, store) -> None:  # 
     assert rows["train"].status == "ok"
     again = run_training_renders("bootstrap", count=2, size=32, spp=2)
     assert again["skipped"] == 1 and again["failed"] == 1
+
+
+@pytest.mark.render
+def test_units_of_a_fan_out_render_what_one_call_renders(db_url: str, store, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The stage's work units (as workers claim them) give the same rows as one whole call."""
+    from photoshape_flow.db import migrate
+    from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.stages import StageContext, plan_batches, process
+
+    with session_scope(db_url) as session:
+        seed_collection(session, store)
+    whole = run_training_renders("bootstrap", count=5, size=24, spp=2)
+    expected = {r.key: r.params_hash for r in _renderings(db_url, "bootstrap")}
+    assert whole["rendered"] == 5
+
+    other = tmp_path / "other.db"
+    url = f"sqlite:///{other}"
+    migrate.upgrade(url)
+    with session_scope(url) as session:
+        seed_collection(session, store)
+    settings = get_settings().model_copy(update={"database_url": url})
+    ctx = StageContext.create(settings)
+    profile = resolve_profile("tiny", ["substances.bootstrap_count=5", "substances.size=24", "substances.spp=2"])
+    units = plan_batches("substances", profile, ctx, batch_size=2)
+    assert [len(u.ids) for u in units] == [2, 2, 1]
+    reports = [process("substances", unit, profile, ctx) for unit in reversed(units)]  # any order
+    assert sum(r.done for r in reports) == 5
+    assert {r.key: r.params_hash for r in _renderings(url, "bootstrap")} == expected
+    assert sum(process("substances", u, profile, ctx).done for u in units) == 0  # claimed and done: skipped

@@ -381,13 +381,16 @@ def run_substances(
 ) -> dict[str, Any]:
     """The whole substances stage: bootstrap renders -> substance network -> PartSubstance rows."""
     settings = settings or get_settings()
-    summary: dict[str, Any] = {}
-    summary["bootstrap"] = run_training_renders("bootstrap", bootstrap_count, size, spp, settings, batch=batch)
+    bootstrap = run_training_renders("bootstrap", bootstrap_count, size, spp, settings, batch=batch)
+    return {"bootstrap": bootstrap, **train_and_assign(settings, size, train_config, train_overrides)}
+
+
+def train_and_assign(settings: Settings, size: int, train_config: str | SubstanceTrainConfig = "cpu",
+                     train_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The network on the bootstrap renders that exist (trained or resumed), then every part's substance."""
     classifier_id, model, info = train_or_resume(settings, train_config, **(train_overrides or {}))
-    summary["network"] = info
     predict_size = _config_size(settings, classifier_id) or size
-    summary["part_substances"] = assign_part_substances(settings, classifier_id, model, predict_size)
-    return summary
+    return {"network": info, "part_substances": assign_part_substances(settings, classifier_id, model, predict_size)}
 
 
 def _config_size(settings: Settings, classifier_id: int) -> int | None:

@@ -308,8 +308,13 @@ def run_training_renders(
     val_fraction: float = VAL_FRACTION,
     saturation_threshold: float = SATURATION_THRESHOLD,
     renderer: Any = None,
+    indices: Sequence[int] | None = None,
 ) -> dict[str, Any]:
     """Render `count` items of `round` (resumable, idempotent); returns a summary dict.
+
+    `indices` limits the call to those positions of the round's item list (train items, then
+    validation items): a unit of work when the stage fans out over workers. Every item's spec is a
+    function of its key and the seed, so any partition renders exactly what one call would.
 
     Summary: requested/rendered/skipped/rejected/failed counts, items per split, mean render seconds
     per image, pose and split sources, warnings.
@@ -328,6 +333,8 @@ def run_training_renders(
         log.warning("%s round: %s", round, warning)
 
     keys = [(split, item_key(round, split, i)) for split in SPLITS for i in range(per_split[split])]
+    if indices is not None:
+        keys = [keys[i] for i in sorted(set(indices)) if 0 <= i < len(keys)]
     inputs = RenderInputs(store=store)
     summary: dict[str, Any] = {
         "round": round, "requested": count, "splits": per_split, "rendered": 0, "skipped": 0,

@@ -1,23 +1,57 @@
-"""Stage `substances` (section 4.3): bootstrap renders, the substance network, a substance per part."""
+"""Stage `substances` (section 4.3): bootstrap renders, the substance network, a substance per part.
+
+It fans out over the bootstrap renders (item positions, as `training-renders` does); its finishing
+step trains (or resumes) the network on them and assigns a substance to every aligned part. Run
+whole, it does the three in order.
+"""
 
 from __future__ import annotations
+
+from typing import Any
 
 from photoshape_flow.profiles import SubstancesConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.work import WorkUnit
 
 NAME = "substances"
 
 
-def run(ctx: StageContext, cfg: SubstancesConfig, work: None = None) -> StageReport:
+def plan(ctx: StageContext, cfg: SubstancesConfig) -> list[WorkUnit]:
+    return [WorkUnit("bootstrap", tuple(range(cfg.bootstrap_count)))]
+
+
+def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline.substances import run_substances
 
+    if work is not None:
+        return _bootstrap(ctx, cfg, work)
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
                              train_config=cfg.network)
-    parts = summary["part_substances"]
-    renders = summary["bootstrap"]
-    return StageReport(
-        NAME, done=int(parts["updated"]), skipped=int(parts["skipped"]), failed=int(parts["failed"]),
-        details={"bootstrap": {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")},
-                 "network": summary["network"], "parts": parts["parts"], "unobserved": parts["unobserved"]},
-    )
+    return _report(summary["part_substances"], summary["network"], summary["bootstrap"])
+
+
+def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
+    """After every bootstrap unit: the network (trained or resumed) and the parts' substances."""
+    from photoshape_flow.pipeline.substances import train_and_assign
+
+    summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network)
+    return _report(summary["part_substances"], summary["network"], None)
+
+
+def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> StageReport:
+    from photoshape_flow.pipeline.training_renders import run_training_renders
+
+    renders = run_training_renders("bootstrap", cfg.bootstrap_count, cfg.size, cfg.spp, ctx.settings,
+                                   renderer=ctx.renderer, indices=work.ids)
+    counts = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}
+    return StageReport(NAME, done=int(renders["rendered"]), skipped=int(renders["skipped"]),
+                       failed=int(renders["failed"]), rejected=int(renders["rejected"]), details={"bootstrap": counts})
+
+
+def _report(parts: dict[str, Any], network: Any, renders: dict[str, Any] | None) -> StageReport:
+    details: dict[str, Any] = {"network": network, "parts": parts["parts"], "unobserved": parts["unobserved"]}
+    if renders is not None:
+        details["bootstrap"] = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}
+    return StageReport(NAME, done=int(parts["updated"]), skipped=int(parts["skipped"]), failed=int(parts["failed"]),
+                       details=details)

@@ -1,18 +1,29 @@
-"""Stage `training-renders` (section 5.1): randomized renders conditioned on part substances."""
+"""Stage `training-renders` (section 5.1): randomized renders conditioned on part substances.
+
+It fans out over item positions (the round's train items, then its validation items): each unit
+renders its positions, so workers on the work pool or Dask processes share the heaviest work of a
+paper-scale run (156k renders) without rendering an item twice.
+"""
 
 from __future__ import annotations
 
 from photoshape_flow.profiles import TrainingRendersConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.work import WorkUnit
 
 NAME = "training-renders"
 
 
-def run(ctx: StageContext, cfg: TrainingRendersConfig, work: None = None) -> StageReport:
+def plan(ctx: StageContext, cfg: TrainingRendersConfig) -> list[WorkUnit]:
+    return [WorkUnit("training", tuple(range(cfg.count)))]
+
+
+def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline.training_renders import run_training_renders
 
-    summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer)
+    summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer,
+                                   indices=None if work is None else work.ids)
     return StageReport(
         NAME, done=int(summary["rendered"]), skipped=int(summary["skipped"]), failed=int(summary["failed"]),
         rejected=int(summary["rejected"]),
