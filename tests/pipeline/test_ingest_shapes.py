@@ -206,8 +206,9 @@ def test_real_models(db_url: str, shared_data: Path) -> None:
     summary = ingest_shapes([shared_data / "models"], isolate=False)
     assert len(summary.added) == 6 and not summary.rejected
     rows = _shapes(db_url)
-    assert rows["chair2"].num_parts == 2 and rows["chair2"].meta["groups"] == ["Seat", "Back", "Feet"]
-    assert rows["sofa_03_1k"].num_parts == 2
+    chair = rows["sweethome3d/chair2"]  # ids are paths relative to the folder given
+    assert chair.num_parts == 2 and chair.meta["groups"] == ["Seat", "Back", "Feet"]
+    assert rows["polyhaven_sofa_03/sofa_03_1k"].num_parts == 2
 
 
 SH3F = Path("/usr/share/sweethome3d/furniture/KatorLegaz.sh3f")
