@@ -1,4 +1,4 @@
-"""Hostile input through `photoshape ingest`: 56 kinds, each one clear line and 0 tracebacks, and the batch goes on.
+"""Hostile input through `photoshape ingest`: 57 kinds, each one clear line and 0 tracebacks, and the batch goes on.
 
 Each case writes one tiny hostile input (sidecars nested 400 KB deep or 2 MB large, folders named like
 files, non-zip and zip-bomb catalogs, names with a newline, a right-to-left override, HTML or rich
@@ -6,7 +6,7 @@ markup, empty and truncated PNG/JPEG/HDR/EXR/GLB, symlinks out of the folder, ..
 input of the same collection, and runs the real CLI (`photoshape ingest <collection>`). Every case
 must: exit 0 (accepted) or 2 (rejected, never a crash), print no traceback and no control or bidi
 character, name the hostile file on a `rejected` line with the expected reason, and still ingest
-the good input after it. The count (56 kinds) is asserted below so it cannot shrink unnoticed.
+the good input after it. The count (57 kinds) is asserted below so it cannot shrink unnoticed.
 """
 
 from __future__ import annotations
@@ -175,6 +175,8 @@ CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
     ("sh3f-zip-bomb-entry", "shapes", _sh3f(*_bomb_member()), "decompression bomb"),
     ("sh3f-traversal-entry", "shapes",
      _sh3f(chair_members("t/chair"), entries=[{**CHAIR, "model": "/../../etc/chair.obj"}]), "a_cat.sh3f:T#chair"),
+    ("sh3f-id-newline", "shapes", _sh3f(chair_members("t/chair"), entries=[{**CHAIR, "id": "T#ch\\nair"}]),
+     "catalog id contains U+000A"),
     ("sh3f-empty", "shapes", _file("a_cat.sh3f", b""), "a_cat.sh3f"),
     ("name-newline", "shapes", _chair_obj("a\nmtllib evil"), "U+000A"),
     ("name-rtl-override", "shapes", _chair_obj("a\u202ejbo.exe"), "U+202E"),
@@ -206,7 +208,7 @@ CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
     ("exr-garbage", "envmaps", _file("a.exr", b"v/1\x01" + b"\x00" * 64), "a.exr"),
     ("dir-named-hdr", "envmaps", _folder("a.hdr"), "a folder, not a file"),
 ]
-KINDS = 56  # the docstring's count
+KINDS = 57  # the docstring's count
 
 
 def _good(collection: str, root: Path) -> Path:

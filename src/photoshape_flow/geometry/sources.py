@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote
 
+from photoshape_flow.export.text import hidden_character
 from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip
 from photoshape_flow.geometry.obj import referenced_files, resolve_inside
 from photoshape_flow.geometry.raw import BadShapeError
@@ -147,6 +148,10 @@ def _catalog_items(
         suffix = Path(entry.model).suffix.lower()
         label = f"{path.name}:{entry.id}"
         source_id = f"{path.stem}/{entry.id}"
+        hidden = hidden_character(entry.id)
+        if hidden is not None:  # an id is a key and is shown everywhere: refused, not stored
+            yield RejectedInput(label, f"catalog id contains {hidden}")
+            continue
         if suffix not in MODEL_SUFFIXES:
             yield RejectedInput(label, f"unsupported model format {suffix!r}", src, source_id, entry.name)
             continue
