@@ -15,6 +15,7 @@ import io
 import json
 import os
 import re
+import shutil
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -211,6 +212,28 @@ CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
 KINDS = 57  # the docstring's count
 
 
+@pytest.fixture(scope="module")
+def migrated_template(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One migrated SQLite file for the module: each case starts from a copy (migrating 60 times costs ~8 s)."""
+    from photoshape_flow.db import migrate
+
+    path = tmp_path_factory.mktemp("hostile-template") / "photoshape.db"
+    migrate.upgrade(f"sqlite:///{path}")
+    return path
+
+
+@pytest.fixture
+def db_url(settings_env: Path, migrated_template: Path) -> str:
+    """The conftest fixture's migrated database under the test's data root, copied from the template."""
+    from photoshape_flow.config import get_settings
+
+    url = get_settings().resolved_database_url
+    target = Path(url.removeprefix("sqlite:///"))
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(migrated_template, target)
+    return url
+
+
 def _good(collection: str, root: Path) -> Path:
     """One valid input of the collection, in a folder that sorts after the hostile one."""
     folder = root / "zz_good"
@@ -258,6 +281,15 @@ def test_hostile_input_is_one_clear_line_and_the_batch_goes_on(
         rejected = [line for line in output.splitlines() if line.startswith("rejected")]
         assert rejected and "".join(expected.split()) in flat, output
     assert _ok_rows(db_url, collection) >= 1 + (expected is None), output  # the good input after it went in
+
+
+def test_rejected_rows_keep_no_hidden_characters(db_url: str, tmp_path: Path) -> None:
+    write_png(tmp_path / "wood_a\u202eb\nc" / "albedo.png", np.zeros((4, 4, 3), np.uint8))
+    result = runner.invoke(app, ["ingest", "materials", str(tmp_path), "--no-previews"])
+    assert result.exit_code == 2 and "U+000A" in "".join(result.output.split()), result.output
+    with session_scope(db_url) as session:
+        row = session.execute(sa.select(m.Material)).scalar_one()
+        assert row.status == "rejected" and not FORBIDDEN.search(row.name + row.error), (row.name, row.error)
 
 
 def test_a_rejected_catalog_gets_a_rejected_row(db_url: str, tmp_path: Path) -> None:
