@@ -63,13 +63,13 @@ def describe_suffixes(suffixes: Iterable[str]) -> str:
     return " ".join(sorted(suffixes))
 
 
-def _walk(folder: Path) -> Iterator[Path]:
-    """Every entry under `folder`, sorted, without following symlinked folders."""
+def _walk(folder: Path) -> list[Path]:
+    """Every entry under `folder` sorted by path (as rglob-and-sort did), symlinked folders not followed."""
+    entries: list[Path] = []
     for current, dirs, files in os.walk(folder, followlinks=False):
-        dirs.sort()
         base = Path(current)
-        for name in sorted([*dirs, *files]):
-            yield base / name
+        entries.extend(base / name for name in [*dirs, *files])
+    return sorted(entries)
 
 
 def check_entry(path: Path, root: Path | None) -> str | None:
