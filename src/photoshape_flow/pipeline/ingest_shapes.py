@@ -9,6 +9,10 @@ id) and everything derived from the old geometry is deleted in the same transact
 through them part substances and assignments), pairs (and their alignments, grades, renderings),
 view features and renderings of the shape. `params_hash` covers the content hash and the
 preprocessing options, so a changed preprocessing version re-ingests as well.
+
+Ids: plain files are keyed by their path relative to the folder given (`photoshape_flow.inputs`);
+a row stored under a file's former id (its stem) is renamed to the new id before anything else
+(`adopt_renamed_row`, by recorded path, then by content), so an old data root is updated in place.
 """
 
 from __future__ import annotations
