@@ -44,9 +44,14 @@ def test_plain_files_and_shapenet_layout(tmp_path: Path) -> None:
     (tmp_path / "plain" / "notes.txt").write_text("ignored")
     items = discover_shapes([tmp_path], category="chair")
     by_source = {(i.source, i.source_id): i for i in items if isinstance(i, ShapeItem)}
-    assert set(by_source) == {("local", "chair"), ("shapenet", "03001627/m1")}
+    # plain files: the path relative to the folder given; ShapeNet keeps synset/model
+    assert set(by_source) == {("local", "plain/chair"), ("shapenet", "03001627/m1")}
     assert by_source[("shapenet", "03001627/m1")].category == "chair"
-    assert by_source[("local", "chair")].category == "chair"
+    assert by_source[("local", "plain/chair")].category == "chair"
+    assert by_source[("local", "plain/chair")].legacy_id == "chair"
+    # a file given by itself keeps its stem
+    (alone,) = discover_shapes([tmp_path / "plain" / "chair.obj"])
+    assert isinstance(alone, ShapeItem) and alone.source_id == "chair"
     # ShapeNet category filter
     assert all(i.source != "shapenet" for i in discover_shapes([tmp_path], category="sofa")
                if isinstance(i, ShapeItem))
@@ -57,7 +62,7 @@ def test_bad_paths_are_rejected_inputs(tmp_path: Path) -> None:
     fbx.write_text("x")
     items = discover_shapes([tmp_path / "missing.obj", fbx])
     assert all(isinstance(i, RejectedInput) for i in items)
-    assert "no such file" in items[0].reason and "unsupported shape format" in items[1].reason
+    assert "no such file" in items[0].reason and "unsupported file type '.fbx'" in items[1].reason
     with pytest.raises(ValueError, match="invalid --name-filter"):
         discover_shapes([tmp_path], name_filter="(")
 

@@ -125,3 +125,14 @@ def test_real_abo_photos(db_url: str, shared_data: Path) -> None:
     assert len(summary.added) == 20 and not summary.rejected and not summary.duplicates
     rows = _rows(db_url)
     assert all(r.size <= 128 and r.native_width == 128 for r in rows.values())  # never upscaled
+
+
+def test_source_ids_are_relative_paths_and_former_stem_rows_are_renamed(db_url: str, tmp_path: Path) -> None:
+    first = _save(tmp_path / "in" / "a" / "chair.jpg", photo(box=(100, 50, 160, 170)))
+    _save(tmp_path / "in" / "b" / "chair.jpg", photo(box=(20, 20, 280, 120), seed=5))
+    ingest_exemplars([first], size=64)  # a file given by itself: its stem, as every id used to be
+    before = _rows(db_url)["chair"]
+    summary = ingest_exemplars([tmp_path / "in"], size=64)
+    rows = _rows(db_url)
+    assert set(rows) == {"a/chair", "b/chair"} and rows["a/chair"].id == before.id
+    assert summary.present == [before.id] and len(summary.added) == 1 and not summary.duplicates

@@ -206,8 +206,9 @@ def test_real_models(db_url: str, shared_data: Path) -> None:
     summary = ingest_shapes([shared_data / "models"], isolate=False)
     assert len(summary.added) == 6 and not summary.rejected
     rows = _shapes(db_url)
-    assert rows["chair2"].num_parts == 2 and rows["chair2"].meta["groups"] == ["Seat", "Back", "Feet"]
-    assert rows["sofa_03_1k"].num_parts == 2
+    chair = rows["sweethome3d/chair2"]  # ids are paths relative to the folder given
+    assert chair.num_parts == 2 and chair.meta["groups"] == ["Seat", "Back", "Feet"]
+    assert rows["polyhaven_sofa_03/sofa_03_1k"].num_parts == 2
 
 
 SH3F = Path("/usr/share/sweethome3d/furniture/KatorLegaz.sh3f")
@@ -223,3 +224,36 @@ def test_kator_legaz_chairs_that_crash_other_importers(db_url: str) -> None:
     rows = _shapes(db_url)
     assert rows["KatorLegaz/Kator Legaz#cafe-chair"].category == "chair"
     assert rows["KatorLegaz/Kator Legaz#cafe-chair"].license.startswith("Creative Commons")
+
+
+def test_folder_per_model_trees_ingest_without_collisions(db_url: str, tmp_path: Path) -> None:
+    write_chair_obj(tmp_path / "shapes" / "a")
+    write_chair_obj(tmp_path / "shapes" / "b", seat_kd="0.1 0.2 0.8")
+    summary = ingest_shapes([tmp_path / "shapes"], isolate=False)
+    assert len(summary.added) == 2 and not summary.rejected, summary.rejected
+    rows = _shapes(db_url)
+    assert set(rows) == {"a/chair", "b/chair"} and {r.name for r in rows.values()} == {"chair"}
+    # two identical files in two folders are two shapes as well, neither takes the other's row
+    write_chair_obj(tmp_path / "shapes" / "c")
+    again = ingest_shapes([tmp_path / "shapes"], isolate=False)
+    assert len(again.added) == 1 and len(again.present) == 2 and set(_shapes(db_url)) == {"a/chair", "b/chair",
+                                                                                           "c/chair"}
+
+
+def test_reingest_renames_rows_stored_under_the_former_stem_id(db_url: str, tmp_path: Path) -> None:
+    write_chair_obj(tmp_path / "shapes" / "a")
+    write_chair_obj(tmp_path / "shapes" / "b", seat_kd="0.1 0.2 0.8")
+    ingest_shapes([tmp_path / "shapes" / "a" / "chair.obj"], isolate=False)  # a file given by itself: its stem
+    before = _shapes(db_url)["chair"]
+    summary = ingest_shapes([tmp_path / "shapes"], isolate=False)  # by its recorded source_path
+    rows = _shapes(db_url)
+    assert set(rows) == {"a/chair", "b/chair"} and rows["a/chair"].id == before.id
+    assert summary.present == [before.id] and len(summary.added) == 1
+    assert rows["a/chair"].mesh_blob == before.mesh_blob  # unchanged content: not re-processed
+
+    # moved, same content: found by (source, sha256) under its former id
+    with session_scope(db_url) as session:
+        session.execute(sa.update(m.Shape).where(m.Shape.id == before.id)
+                        .values(source_id="chair", source_path="/gone/chair.obj"))
+    summary = ingest_shapes([tmp_path / "shapes"], isolate=False)
+    assert set(_shapes(db_url)) == {"a/chair", "b/chair"} and before.id in summary.present and not summary.added

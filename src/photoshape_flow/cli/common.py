@@ -6,16 +6,24 @@ from typing import NoReturn
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
+from photoshape_flow.export.text import one_line
 from photoshape_flow.masking import mask_password
 
 console = Console()
 err_console = Console(stderr=True)
 
 
+def shown(value: object) -> str:
+    """Text from data (file names, reasons, names) safe to print with rich: one line, no control or
+    bidi character (`export.text.one_line`, the one sanitiser), and no square bracket read as markup."""
+    return escape(one_line(value))
+
+
 def fail(message: str, code: int = 1) -> NoReturn:
     """Print a one-line error and exit non-zero (database passwords masked, whatever the message quotes)."""
-    err_console.print(f"[bold red]error:[/] {mask_password(message)}", highlight=False)
+    err_console.print(f"[bold red]error:[/] {shown(mask_password(message))}", highlight=False)
     raise typer.Exit(code)
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, require_database
+from photoshape_flow.cli.common import console, fail, require_database, shown
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, parse_formats
 
 
@@ -45,7 +45,7 @@ def export(
             table.add_column(column)
         for r in results:
             detail = ", ".join(sorted(r["files"])) if r["status"] == "ok" else r["error"]
-            table.add_row(str(r["pair_id"]), str(r["method_key"] or ""), r["status"], detail)
+            table.add_row(str(r["pair_id"]), str(r["method_key"] or ""), r["status"], shown(detail))
         console.print(table)
     failed = [r for r in results if r["status"] != "ok"]
     if failed:

@@ -18,7 +18,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, err_console, fail, require_database
+from photoshape_flow.cli.common import console, err_console, fail, require_database, shown
 
 ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps.", no_args_is_help=True)
 
@@ -65,7 +65,7 @@ def _progress(title: str) -> Iterator[Callable[[str, int, int], None]]:
     task = bar.add_task("", total=None)
 
     def update(label: str, done: int, total: int) -> None:
-        bar.update(task, completed=done, total=total, description=Path(label).name[:50])
+        bar.update(task, completed=done, total=total, description=shown(Path(label).name[:50]))
 
     with bar:
         yield update
@@ -87,11 +87,11 @@ def print_summary(summary: Any, allow_rejected: bool = False) -> None:
         console.print(f"{len(summary.duplicates)} duplicates marked (excluded): "
                       + ", ".join(f"{a} -> {b}" for a, b in summary.duplicates[:20]), highlight=False)
     for label, message in summary.warnings:
-        console.print(f"[yellow]warning[/] {label}: {message}", highlight=False)
+        console.print(f"[yellow]warning[/] {shown(label)}: {shown(message)}", highlight=False)
     for label, reason in summary.skipped:
-        console.print(f"[dim]skipped[/] {label}: {reason}", highlight=False)
+        console.print(f"[dim]skipped[/] {shown(label)}: {shown(reason)}", highlight=False)
     for label, reason in summary.rejected:
-        err_console.print(f"[red]rejected[/] {label}: {reason}", highlight=False)
+        err_console.print(f"[red]rejected[/] {shown(label)}: {shown(reason)}", highlight=False)
     if summary.rejected:
         table_name, key = TABLES[summary.kind]
         err_console.print(

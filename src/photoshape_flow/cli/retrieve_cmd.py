@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, err_console, fail, require_database
+from photoshape_flow.cli.common import console, err_console, fail, require_database, shown
 
 
 def retrieve(
@@ -118,7 +118,7 @@ def retrieve(
         for column in ("rank", "material", "substance", "score", "p(material)"):
             table.add_column(column, justify="right" if column in ("rank", "score", "p(material)") else "left")
         for i, r in enumerate(regions, start=1):
-            table.add_row(str(i), names.get(r.material_id, f"#{r.material_id}"), r.substance,
+            table.add_row(str(i), shown(names.get(r.material_id, f"#{r.material_id}")), r.substance,
                           f"{r.score:.4f}", f"{r.probability:.4f}")
         console.print(table)
 

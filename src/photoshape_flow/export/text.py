@@ -12,6 +12,7 @@ visible ``\\uXXXX`` escapes. `is_web_url` decides which URLs may become links.
 from __future__ import annotations
 
 import re
+import unicodedata
 from collections.abc import Mapping
 from typing import Any
 from urllib.parse import urlsplit
@@ -32,6 +33,20 @@ def one_line(value: object) -> str:
         return ""
     text = _BREAKS.sub(" ", str(value))
     return _HIDDEN.sub(_escape, text)
+
+
+def hidden_character(value: str) -> str | None:
+    """The first line break, control, bidi or surrogate character of `value`, described (None if clean).
+
+    For names that become keys or file names (ingest rejects them rather than store a name that
+    renders as another or splits a line); free text is escaped by `one_line` instead.
+    """
+    match = _BREAKS.search(value) or _HIDDEN.search(value)
+    if match is None:
+        return None
+    char = match.group()[0]
+    name = unicodedata.name(char, "control character")
+    return f"U+{ord(char):04X} ({name.lower()})"
 
 
 def one_line_strings(value: Any) -> Any:

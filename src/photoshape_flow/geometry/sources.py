@@ -7,7 +7,9 @@ as `RejectedInput` so a batch goes on. `materialize` then makes an item's files 
 shape is made of (model, MTL, textures), the hash that makes re-ingest idempotent.
 
 Natural keys:
-- plain files: source "local" (or --source), source_id = file stem;
+- plain files: source "local" (or --source), source_id = the path relative to the folder given
+  without extension (``a/chair`` for ``<folder>/a/chair.obj``), or the file stem for a file given
+  by itself (`photoshape_flow.inputs.source_id_for`);
 - ShapeNet: source "shapenet", source_id "<synset>/<model id>", category from the synset;
 - Sweet Home 3D: source "sweethome3d", source_id "<catalog file stem>/<piece id>".
 """
@@ -15,7 +17,6 @@ Natural keys:
 from __future__ import annotations
 
 import hashlib
-import json
 import re
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -25,13 +26,17 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote
 
+from photoshape_flow.export.text import hidden_character
 from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip
 from photoshape_flow.geometry.obj import referenced_files, resolve_inside
 from photoshape_flow.geometry.raw import BadShapeError
 from photoshape_flow.geometry.sh3f import read_catalog
+from photoshape_flow.inputs import walk_inputs
+from photoshape_flow.sidecar import parse_document
 
 MODEL_SUFFIXES = {".obj": "obj", ".gltf": "gltf", ".glb": "glb"}
 CATALOG_SUFFIXES = {".sh3f"}
+GLTF_MAX_JSON_BYTES = 64 * 1024 * 1024  # a .gltf's JSON (geometry lives in its buffers)
 
 # ShapeNetCore v2 synset ids -> category names.
 SHAPENET_SYNSETS: dict[str, str] = {
@@ -73,6 +78,7 @@ class ShapeItem:
     source_url: str | None = None
     rotation: tuple[float, ...] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    legacy_id: str | None = None  # the id of plain files before ids were relative paths (the stem)
 
 
 @dataclass
@@ -128,7 +134,8 @@ def _catalog_items(
             catalog = read_catalog(archive)
             sizes = {name.lower(): archive.find(name).file_size for name in archive.names()}  # type: ignore[union-attr]
     except (BadShapeError, OSError) as exc:
-        yield RejectedInput(str(path), str(exc))
+        # a catalog-level row (source_id: the catalog's stem), so the reject is queryable like others
+        yield RejectedInput(str(path), str(exc), source or "sweethome3d", path.stem, path.stem)
         return
     src = source or "sweethome3d"
     for label, reason in catalog.invalid:
@@ -141,6 +148,10 @@ def _catalog_items(
         suffix = Path(entry.model).suffix.lower()
         label = f"{path.name}:{entry.id}"
         source_id = f"{path.stem}/{entry.id}"
+        hidden = hidden_character(entry.id)
+        if hidden is not None:  # an id is a key and is shown everywhere: refused, not stored
+            yield RejectedInput(label, f"catalog id contains {hidden}")
+            continue
         if suffix not in MODEL_SUFFIXES:
             yield RejectedInput(label, f"unsupported model format {suffix!r}", src, source_id, entry.name)
             continue
@@ -189,67 +200,51 @@ def discover_shapes(
     pattern = compile_filter(name_filter)
     limits = archive_limits or ArchiveLimits()
     out: list[ShapeItem | RejectedInput] = []
-    for given in paths:
-        path = Path(given)
-        if not path.exists():
-            out.append(RejectedInput(str(path), "no such file or folder"))
+    for found in walk_inputs(paths, set(MODEL_SUFFIXES) | CATALOG_SUFFIXES):
+        file = found.path
+        if found.reason is not None:
+            out.append(RejectedInput(str(file), found.reason))
             continue
-        if path.is_dir():
-            files = sorted(
-                p for p in path.rglob("*")
-                if p.is_file() and (p.suffix.lower() in MODEL_SUFFIXES or p.suffix.lower() in CATALOG_SUFFIXES)
-            )
-            root = path
-        else:
-            files = [path]
-            root = path.parent
-        for file in files:
-            suffix = file.suffix.lower()
-            if suffix in CATALOG_SUFFIXES:
-                out.extend(_catalog_items(file, source, cats, pattern, license, limits))
+        suffix = file.suffix.lower()
+        if suffix in CATALOG_SUFFIXES:
+            out.extend(_catalog_items(file, source, cats, pattern, license, limits))
+            continue
+        try:
+            size = file.stat().st_size
+        except OSError as exc:
+            out.append(RejectedInput(str(file), f"unreadable ({exc.strerror or exc})"))
+            continue
+        key = _shapenet_key(file)
+        if key is not None:
+            synset, model_id = key
+            item_category = SHAPENET_SYNSETS.get(synset, synset)
+            if cats is not None and item_category not in cats and synset not in cats:
                 continue
-            if suffix not in MODEL_SUFFIXES:
-                out.append(RejectedInput(str(file), f"unsupported shape format {suffix or '(none)'!r} "
-                                         "(supported: .obj .gltf .glb .sh3f)"))
+            if not _matches(pattern, f"{synset}/{model_id}", item_category):
                 continue
-            try:
-                size = file.stat().st_size
-            except OSError as exc:
-                out.append(RejectedInput(str(file), f"unreadable ({exc.strerror or exc})"))
-                continue
-            key = _shapenet_key(file)
-            if key is not None:
-                synset, model_id = key
-                item_category = SHAPENET_SYNSETS.get(synset, synset)
-                if cats is not None and item_category not in cats and synset not in cats:
-                    continue
-                if not _matches(pattern, f"{synset}/{model_id}", item_category):
-                    continue
-                out.append(ShapeItem(
-                    source=source or "shapenet", source_id=f"{synset}/{model_id}", label=str(file), fmt="obj",
-                    name=model_id, category=item_category, file=file, root=file.parent.parent, size_bytes=size,
-                    license=license, attribution=attribution or "ShapeNetCore v2", meta={"synset": synset},
-                ))
-                continue
-            try:
-                rel = file.relative_to(root).as_posix()
-            except ValueError:
-                rel = file.name
-            if not _matches(pattern, file.stem, rel):
-                continue
-            single = category if category and "," not in category else None
             out.append(ShapeItem(
-                source=source or "local", source_id=file.stem, label=str(file), fmt=MODEL_SUFFIXES[suffix],
-                name=file.stem, category=single, file=file, root=root,
-                size_bytes=size, license=license, attribution=attribution, meta={"relative_path": rel},
+                source=source or "shapenet", source_id=f"{synset}/{model_id}", label=str(file), fmt="obj",
+                name=model_id, category=item_category, file=file, root=file.parent.parent, size_bytes=size,
+                license=license, attribution=attribution or "ShapeNetCore v2", meta={"synset": synset},
             ))
+            continue
+        root = found.root or file.parent
+        rel = file.relative_to(root).as_posix()
+        if not _matches(pattern, file.stem, rel):
+            continue
+        single = category if category and "," not in category else None
+        out.append(ShapeItem(
+            source=source or "local", source_id=found.source_id, label=str(file), fmt=MODEL_SUFFIXES[suffix],
+            name=file.stem, category=single, file=file, root=root, size_bytes=size, license=license,
+            attribution=attribution, meta={"relative_path": rel}, legacy_id=found.legacy_id,
+        ))
     return out
 
 
 def gltf_references(path: Path) -> list[Path]:
     """External buffers and images of a .gltf (data: URIs excluded), for content hashing."""
     try:
-        doc = json.loads(path.read_bytes())
+        doc = parse_document(path, max_bytes=GLTF_MAX_JSON_BYTES)
     except (OSError, ValueError):
         return []
     found: list[Path] = []

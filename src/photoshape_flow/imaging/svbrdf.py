@@ -12,17 +12,17 @@ Analytic materials are a sidecar with `"kind": "analytic"` and `params`, and no 
 
 from __future__ import annotations
 
-import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from photoshape_flow.export.text import hidden_character
 from photoshape_flow.imaging.io import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, BadImageError, read_map
+from photoshape_flow.sidecar import DocumentError, parse_document
 from photoshape_flow.vocab import SUBSTANCES
 
 CHANNELS: tuple[str, ...] = ("albedo", "roughness", "metallic", "specular", "normal", "height")
@@ -92,20 +92,21 @@ def classify_map(filename: str) -> tuple[str, str | None] | None:
 
 
 def read_sidecar(folder: Path) -> tuple[dict[str, Any] | None, Path | None]:
-    """The parsed sidecar of a folder (JSON preferred over TOML), or (None, None)."""
+    """The parsed sidecar of a folder (JSON preferred over TOML), or (None, None).
+
+    Parsed within size and depth limits (`photoshape_flow.sidecar`): a hostile sidecar is one
+    BadMaterialError naming the file, never a RecursionError that would end the batch.
+    """
     for name in SIDECARS:
         path = folder / name
         if not path.is_file():
             continue
         try:
-            text = path.read_text(encoding="utf-8")
-            data = json.loads(text) if name.endswith(".json") else tomllib.loads(text)
-        except (OSError, UnicodeDecodeError) as exc:
-            raise BadMaterialError(f"{name}: unreadable ({exc})") from exc
-        except json.JSONDecodeError as exc:
-            raise BadMaterialError(f"{name}: invalid JSON at line {exc.lineno} ({exc.msg})") from exc
-        except tomllib.TOMLDecodeError as exc:
-            raise BadMaterialError(f"{name}: invalid TOML ({exc})") from exc
+            data = parse_document(path)
+        except OSError as exc:
+            raise BadMaterialError(f"{name}: unreadable ({exc.strerror or exc})") from exc
+        except DocumentError as exc:
+            raise BadMaterialError(f"{name}: {exc}") from exc
         if not isinstance(data, dict):
             raise BadMaterialError(f"{name}: expected an object at the top level")
         return data, path
@@ -185,6 +186,22 @@ def is_material_folder(folder: Path) -> bool:
     return False
 
 
+def _text_field(sidecar: dict[str, Any], key: str, max_chars: int) -> str | None:
+    """A sidecar's text value (None when absent), or BadMaterialError when it is not short text.
+
+    Free text may hold any character (exports and the gallery escape it); it must be a string,
+    since a list or table would reach a text column or a file name.
+    """
+    value = sidecar.get(key)
+    if value is None or value == "":
+        return None
+    if not isinstance(value, str):
+        raise BadMaterialError(f"{key} must be text, got {type(value).__name__}")
+    if len(value) > max_chars:
+        raise BadMaterialError(f"{key} is {len(value)} characters long (limit {max_chars})")
+    return value.strip()
+
+
 def scan_material(folder: Path, *, substance: str | None = None, source: str | None = None,
                   license: str | None = None, attribution: str | None = None) -> MaterialScan:
     """Classify a folder's files and read its sidecar; BadMaterialError if it cannot be a material.
@@ -195,9 +212,12 @@ def scan_material(folder: Path, *, substance: str | None = None, source: str | N
     sidecar, sidecar_path = read_sidecar(folder)
     sidecar = sidecar or {}
     warnings: list[str] = []
-    name = str(sidecar.get("name") or folder.name).strip()
+    name = _text_field(sidecar, "name", 255) or folder.name.strip()
     if not name:
         raise BadMaterialError("empty material name")
+    hidden = hidden_character(name)
+    if hidden is not None:
+        raise BadMaterialError(f"material name contains {hidden}")
     chosen = sidecar.get("substance") or substance
     if not chosen:
         prefix = folder.name.split("_", 1)[0].lower()
@@ -224,10 +244,10 @@ def scan_material(folder: Path, *, substance: str | None = None, source: str | N
         raise BadMaterialError(f"normal must be \"gl\" or \"dx\", got {sidecar.get('normal')!r}")
     params = validate_params(sidecar.get("params"))
     provenance = {
-        "source": sidecar.get("source") or source,
-        "license": sidecar.get("license") or license,
-        "attribution": sidecar.get("attribution") or attribution,
-        "source_url": sidecar.get("source_url"),
+        "source": _text_field(sidecar, "source", 64) or source,
+        "license": _text_field(sidecar, "license", 2000) or license,
+        "attribution": _text_field(sidecar, "attribution", 2000) or attribution,
+        "source_url": _text_field(sidecar, "source_url", 2000),
     }
     files: dict[str, Path] = {}
     conventions: dict[str, str | None] = {}

@@ -12,17 +12,19 @@ from __future__ import annotations
 import copy
 import hashlib
 import logging
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db.base import Base
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.export.text import one_line as text_line
 from photoshape_flow.geometry.archive import ArchiveLimits
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
@@ -56,6 +58,8 @@ class IngestSummary:
         return len(self.added) + len(self.present) + len(self.replaced) + len(self.rejected)
 
     def reject(self, label: str, reason: str) -> None:
+        """Note a rejected input; label and reason are made one safe line (names may hold anything)."""
+        label, reason = text_line(label), text_line(reason)
         self.rejected.append((label, reason))
         logger.warning("%s: %s", label, reason)
 
@@ -71,6 +75,7 @@ class IngestSummary:
             self.added.append(row_id)
 
     def warn(self, label: str, message: str) -> None:
+        label, message = text_line(label), text_line(message)
         self.warnings.append((label, message))
         logger.info("%s: %s", label, message)
 
@@ -105,6 +110,7 @@ class FailureWriter:
         self, url: str, summary: IngestSummary, label: str, row: Mapping[str, Any], status: str, reason: str,
         existing: Mapping[str, Any] | None,
     ) -> None:
+        reason = text_line(reason)
         summary.reject(label, reason)
         if _failure_unchanged(existing, row, status, reason):
             return  # same outcome as last time: nothing to change
@@ -192,22 +198,35 @@ def one_line(exc: BaseException) -> str:
     return text[:500]
 
 
-def iter_files(paths: Iterable[str | Path], suffixes: set[str]) -> Iterator[tuple[Path, str | None]]:
-    """Files under the given paths with one of `suffixes` (folders recursively, sorted).
+def adopt_renamed_row(
+    url: str, model: type[Base], *, source: str, source_id: str, legacy_id: str | None, source_path: str,
+    sha256: str | None, batch_ids: Collection[str],
+) -> int | None:
+    """Give the row a file had under its former id (its stem) the file's new id; the row's id, or None.
 
-    Yields (path, None) for usable files and (path, reason) for given paths that are missing or
-    have the wrong type; files of other types inside folders are skipped silently.
+    Source ids of plain files used to be file stems and are now paths relative to the ingested
+    folder, so a re-ingest of an existing data root must update those rows, not insert duplicates
+    beside them. A row is adopted when it has the file's former id and either its recorded
+    `source_path` or its content (`sha256`) matches, no row holds the new id yet, and the former
+    id is not itself an id of this batch (then that file owns it: two identical files in two
+    folders must not take each other's rows).
     """
-    for given in paths:
-        path = Path(given)
-        if not path.exists():
-            yield path, "no such file or folder"
-            continue
-        if path.is_dir():
-            for found in sorted(p for p in path.rglob("*") if p.is_file() and p.suffix.lower() in suffixes):
-                yield found, None
-            continue
-        if path.suffix.lower() not in suffixes:
-            yield path, f"unsupported file type {path.suffix or '(none)'!r} (expected {', '.join(sorted(suffixes))})"
-            continue
-        yield path, None
+    if legacy_id is None or legacy_id == source_id or legacy_id in batch_ids:
+        return None
+    key = (model.source == source)  # type: ignore[attr-defined]
+    with session_scope(url) as session:
+        taken = session.execute(sa.select(model.id).where(key, model.source_id == source_id)).first()  # type: ignore[attr-defined]
+        if taken is not None:
+            return None
+        matches = [model.source_path == source_path]  # type: ignore[attr-defined]
+        if sha256:
+            matches.append(model.sha256 == sha256)  # type: ignore[attr-defined]
+        row_id = session.execute(
+            sa.select(model.id).where(key, model.source_id == legacy_id, sa.or_(*matches))  # type: ignore[attr-defined]
+        ).scalar_one_or_none()
+        if row_id is None:
+            return None
+        session.execute(sa.update(model).where(model.id == row_id).values(source_id=source_id))  # type: ignore[attr-defined]
+    logger.info("%s %d: source_id %r is now %r (ids are paths relative to the ingested folder)",
+                model.__tablename__, row_id, legacy_id, source_id)
+    return row_id

@@ -24,13 +24,13 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError, WorkerTimeoutError
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.hdr import HDR_SUFFIXES, BadEnvmapError, EnvmapLimits, validate_envmap
+from photoshape_flow.inputs import walk_inputs
 from photoshape_flow.pipeline.ingest_common import (
     FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
     hash_fraction,
-    iter_files,
     one_line,
     resolve_settings,
     store_for,
@@ -172,13 +172,14 @@ def ingest_envmaps(
     limits = limits or IngestLimits.from_settings(settings)
     env_limits = envmap_limits or EnvmapLimits()
     summary = IngestSummary("envmaps")
-    entries = list(iter_files(paths, HDR_SUFFIXES))
+    entries = list(walk_inputs(paths, HDR_SUFFIXES))
     seen: dict[str, Path] = {}
     worker = IsolatedWorker(limits.timeout_s) if isolate else None
     try:
-        for done, (path, reason) in enumerate(entries, start=1):
-            if reason is not None:
-                summary.reject(str(path), reason)
+        for done, found in enumerate(entries, start=1):
+            path = found.path
+            if found.reason is not None:
+                summary.reject(str(path), found.reason)
             elif path.stem in seen:
                 summary.reject(str(path), f"envmap name {path.stem!r} already used by {seen[path.stem]} in this batch")
             else:

@@ -4,9 +4,11 @@ Items are processed in chunks: (1) each photo is decoded, cleaned and its crop, 
 feature written as blobs; (2) the chunk's features are range-searched (blocked GEMM) against the
 index of existing originals and against each other; (3) each exemplar is upserted in its own
 transaction, duplicates with `duplicate_of_id` set and `exclude` = true. Natural key: (source,
-source_id = file stem). Replacement of a photo whose file changed deletes its pairs (with their
-alignments, substances, assignments, grades, renderings) and its features, and frees the exemplars
-that were marked duplicates of it (their flag is cleared, not re-checked).
+source_id = path relative to the folder given, without extension; a file given by itself: its stem;
+see `photoshape_flow.inputs`); a row stored under a photo's former id (its stem) is renamed, not
+duplicated. Replacement of a photo whose file changed deletes its pairs (with their alignments,
+substances, assignments, grades, renderings) and its features, and frees the exemplars that were
+marked duplicates of it (their flag is cleared, not re-checked).
 """
 
 from __future__ import annotations
@@ -29,12 +31,13 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.dedupe import DEFAULT_RADIUS, DESCRIPTOR, assign_duplicates, dense_hog
 from photoshape_flow.imaging.exemplar import ExemplarOptions, prepare_exemplar
 from photoshape_flow.imaging.io import BadImageError, read_image
+from photoshape_flow.inputs import Found, walk_inputs
 from photoshape_flow.pipeline.ingest_common import (
     FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
-    iter_files,
+    adopt_renamed_row,
     one_line,
     resolve_settings,
     store_for,
@@ -164,35 +167,28 @@ def ingest_exemplars(
     options = options or ExemplarOptions(size=size)
     src = source or "local"
     summary = IngestSummary("exemplars")
-    entries = list(iter_files(paths, IMAGE_SUFFIXES))
+    entries = list(walk_inputs(paths, IMAGE_SUFFIXES))
     params_payload = {"options": options.as_dict(), "descriptor": DESCRIPTOR, "version": 1}
     seen: dict[str, Path] = {}
     done = 0
-
-    # natural keys of the batch, so their old features are left out of the index
-    keys = {p.stem for p, reason in entries if reason is None}
-    skip_ids: set[int] = set()
-    if keys:
-        with session_scope(url) as session:
-            skip_ids = set(session.execute(
-                sa.select(m.Exemplar.id).where(m.Exemplar.source == src, m.Exemplar.source_id.in_(list(keys)))
-            ).scalars())
-    index, index_ids = _load_index(url, store, skip_ids)
+    batch_ids = {f.source_id for f in entries if f.reason is None}
+    index, index_ids = _load_index(url, store, _batch_rows(url, src, entries))
 
     for start in range(0, len(entries), CHUNK):
         ready: list[_Ready] = []
-        for path, reason in entries[start : start + CHUNK]:
+        for found in entries[start : start + CHUNK]:
             done += 1
+            path, source_id = found.path, found.source_id
             label = str(path)
-            if reason is not None:
-                summary.reject(label, reason)
-            elif path.stem in seen:
-                summary.reject(label, f"source_id {path.stem!r} already used by {seen[path.stem]} in this batch "
+            if found.reason is not None:
+                summary.reject(label, found.reason)
+            elif source_id in seen:
+                summary.reject(label, f"source_id {source_id!r} already used by {seen[source_id]} in this batch "
                                "(use --source to tell them apart)")
             else:
-                seen[path.stem] = path
-                item = _prepare(path, src, category, license, attribution, source_url, options, limits,
-                                params_payload, url, store, summary)
+                seen[source_id] = path
+                item = _prepare(found, src, category, license, attribution, source_url, options, limits,
+                                params_payload, url, store, summary, batch_ids)
                 if isinstance(item, _Ready):
                     ready.append(item)
             if progress is not None:
@@ -234,13 +230,28 @@ def ingest_exemplars(
     return summary
 
 
+def _batch_rows(url: str, source: str, entries: list[Found]) -> set[int]:
+    """Rows of this batch's photos (by id, or by former id and path), left out of the dedupe index."""
+    usable = [f for f in entries if f.reason is None]
+    if not usable:
+        return set()
+    ids = {f.source_id for f in usable}
+    former = {(f.legacy_id, str(f.path.resolve())) for f in usable}
+    with session_scope(url) as session:
+        rows = session.execute(
+            sa.select(m.Exemplar.id, m.Exemplar.source_id, m.Exemplar.source_path)
+            .where(m.Exemplar.source == source, m.Exemplar.source_id.in_(ids | {legacy for legacy, _ in former}))
+        ).all()
+    return {row_id for row_id, sid, path in rows if sid in ids or (sid, path) in former}
+
+
 def _prepare(
-    path: Path, source: str, category: str | None, license: str | None, attribution: str | None,
+    found: Found, source: str, category: str | None, license: str | None, attribution: str | None,
     source_url: str | None, options: ExemplarOptions, limits: IngestLimits, params_payload: dict[str, Any],
-    url: str, store: BlobStore, summary: IngestSummary,
+    url: str, store: BlobStore, summary: IngestSummary, batch_ids: set[str],
 ) -> _Ready | None:
+    path, source_id = found.path, found.source_id
     label = str(path)
-    source_id = path.stem
     existing = _existing(url, source, source_id)
     row: dict[str, Any] = {
         "source": source, "source_id": source_id, "name": path.stem, "category": category,
@@ -253,6 +264,10 @@ def _prepare(
         _record_failure(url, summary, label, row, STATUS_REJECTED, f"unreadable ({exc.strerror or exc})", existing)
         return None
     row["sha256"] = sha
+    if existing is None and adopt_renamed_row(url, m.Exemplar, source=source, source_id=source_id,
+                                              legacy_id=found.legacy_id, source_path=row["source_path"],
+                                              sha256=sha, batch_ids=batch_ids) is not None:
+        existing = _existing(url, source, source_id)
     params_hash = stable_hash({"sha256": sha, **params_payload})
     if existing is not None and existing["status"] == STATUS_OK and existing["sha256"] == sha \
             and existing["params_hash"] == params_hash:

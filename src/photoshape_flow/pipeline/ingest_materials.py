@@ -27,6 +27,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.events import EventSink
+from photoshape_flow.export.text import one_line as text_line
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.svbrdf import (
     SIDECARS,
@@ -160,7 +161,7 @@ def _ingest_folder(
     try:
         scan = scan_material(folder, substance=substance, source=source, license=license, attribution=attribution)
     except BadMaterialError as exc:
-        name = folder.name
+        name = text_line(folder.name)  # the rejected row's key: one safe line, whatever the folder is called
         _record_failure(url, summary, label, {"name": name, "source_path": str(folder.resolve()),
                                               "substance": (substance or "unknown")[:32]},
                         STATUS_REJECTED, one_line(exc), _existing(url, name))

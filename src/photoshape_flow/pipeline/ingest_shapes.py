@@ -9,6 +9,10 @@ id) and everything derived from the old geometry is deleted in the same transact
 through them part substances and assignments), pairs (and their alignments, grades, renderings),
 view features and renderings of the shape. `params_hash` covers the content hash and the
 preprocessing options, so a changed preprocessing version re-ingests as well.
+
+Ids: plain files are keyed by their path relative to the folder given (`photoshape_flow.inputs`);
+a row stored under a file's former id (its stem) is renamed to the new id before anything else
+(`adopt_renamed_row`, by recorded path, then by content), so an old data root is updated in place.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from photoshape_flow.pipeline.ingest_common import (
     IngestLimits,
     IngestSummary,
     Progress,
+    adopt_renamed_row,
     one_line,
     resolve_settings,
     split_for,
@@ -128,10 +133,20 @@ def _part_rows(shape_id: int, prepared: PreparedShape) -> list[dict[str, Any]]:
 
 def _ingest_item(
     item: ShapeItem, *, url: str, store: BlobStore, summary: IngestSummary, split: str | None,
-    limits: IngestLimits, options: PreprocessOptions, worker: IsolatedWorker | None,
+    limits: IngestLimits, options: PreprocessOptions, worker: IsolatedWorker | None, batch_ids: set[str],
 ) -> None:
     label = item.label
     existing = _existing(url, item.source, item.source_id)
+
+    def adopt(sha256: str | None) -> dict[str, Any] | None:
+        """The row this file had under its former id (by path, then by content), renamed to its id."""
+        found = adopt_renamed_row(url, m.Shape, source=item.source, source_id=item.source_id,
+                                  legacy_id=item.legacy_id, source_path=_source_path(item), sha256=sha256,
+                                  batch_ids=batch_ids)
+        return None if found is None else _existing(url, item.source, item.source_id)
+
+    if existing is None:
+        existing = adopt(None)
     wanted_split = split or split_for(item.source, item.source_id)
     row = _base_row(item, wanted_split)
     if item.size_bytes > limits.max_shape_bytes:
@@ -142,6 +157,8 @@ def _ingest_item(
     try:
         with materialize(item, limits.archive) as files:
             row["sha256"] = files.sha256
+            if existing is None:
+                existing = adopt(files.sha256)
             params_hash = stable_hash({"sha256": files.sha256, "preprocess": item_options.as_dict(),
                                        "rotation": item.rotation})
             if (
@@ -229,6 +246,7 @@ def ingest_shapes(
     items = discover_shapes(paths, source=source, category=category, name_filter=name_filter,
                             license=license, attribution=attribution, archive_limits=limits.archive)
     seen: dict[tuple[str, str], str] = {}
+    batch_ids = {item.source_id for item in items if isinstance(item, ShapeItem)}
     worker = IsolatedWorker(limits.timeout_s) if isolate else None
     try:
         for done, item in enumerate(items, start=1):
@@ -249,7 +267,7 @@ def ingest_shapes(
                 else:
                     seen[key] = item.label
                     _ingest_item(item, url=url, store=store, summary=summary, split=split, limits=limits,
-                                 options=options, worker=worker)
+                                 options=options, worker=worker, batch_ids=batch_ids)
             if progress is not None:
                 progress(item.label, done, len(items))
     finally:
