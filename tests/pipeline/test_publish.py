@@ -213,3 +213,28 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     assert bad.exit_code == 1 and "unknown export format(s) fbx; valid: glb, gltf, xml, obj" in bad.output
     none = runner.invoke(app, ["export", "--out", str(out), "--method", "color-match"])
     assert none.exit_code == 1 and "no candidates" in none.output
+
+
+@pytest.mark.render
+def test_published_xml_renders_the_gallery_image(db_url, store, tmp_path):
+    """The exported Mitsuba XML, reloaded, renders the published exemplar-view image: same framing
+    (silhouette IoU), same materials, light and noise (mean absolute error at equal spp and seed)."""
+    from photoshape_flow.pipeline.downloads import export_dir
+    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.render.runtime import ensure_mitsuba
+    from photoshape_flow.render.tonemap import composite
+
+    ids = seed(db_url, store, tmp_path)
+    mk, good = f"classifier:{ids['classifier']}", ids["good"]
+    run_publish(views=0, size=24, spp=4, formats=("xml",))
+    row = _renderings(db_url)[("photoshape", f"{good}/{mk}/exemplar")]
+    published, coverage = store.load_image(row.blobs["srgb"]), store.load_image(row.blobs["alpha"])
+    mi = ensure_mitsuba()
+    xml = export_dir(good, mk) / "mitsuba" / "scene.xml"
+    image = np.asarray(mi.render(mi.load_file(str(xml))))  # Mitsuba's defaults: the XML's film, spp and seed
+    _, srgb = composite(image[..., :3], image[..., 3], "white")
+    ours, theirs = np.asarray(coverage) > 127, image[..., 3] > 0.5
+    assert theirs.mean() > 0.1  # the shape is in view
+    assert (ours & theirs).sum() / (ours | theirs).sum() >= 0.99
+    assert np.abs(srgb.astype(np.float32) - published.astype(np.float32)).mean() <= 2.0
+    assert 'value="24"' in xml.read_text() and row.params["camera"]["fov"] < 50.0  # framed, not the pair's fov

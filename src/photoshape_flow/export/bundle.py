@@ -44,6 +44,7 @@ def export_photoshape(
     size: int = 512,
     spp: int = 128,
     max_texture_size: int | None = 2048,
+    seed: int = 0,
 ) -> dict[str, Path]:
     """Write the requested formats plus `assignment.json`; returns format (or `SIDECAR`) -> main file path.
 
@@ -51,7 +52,8 @@ def export_photoshape(
     """
     formats = parse_formats(list(formats))
     item = ExportInput(shape, materials, uv_transforms, document, envmap=envmap, camera=camera,
-                       resolve_ref=resolve_ref, size=size, spp=spp, max_texture_size=max_texture_size)
+                       resolve_ref=resolve_ref, size=size, spp=spp, max_texture_size=max_texture_size,
+                       seed=seed)
     out = Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))

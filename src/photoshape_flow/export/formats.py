@@ -32,8 +32,9 @@ class ExportInput:
     """One PhotoShape as the writers take it.
 
     `materials[i]` / `uv_transforms[i]` belong to `shape.parts[i]` (None = built-in / no jitter).
-    `camera` is the view a scene format renders, `envmap` its light (None: constant white);
-    `max_texture_size` limits the textures of the interchange formats.
+    `camera` is the view a scene format renders, `envmap` its light (None: constant white), `size`,
+    `spp` and `seed` its film and sampler (those of the render it accompanies, so it renders the same
+    image); `max_texture_size` limits the textures of the interchange formats.
     """
 
     shape: Any
@@ -46,6 +47,7 @@ class ExportInput:
     size: int = 512
     spp: int = 128
     max_texture_size: int | None = 2048
+    seed: int = 0
 
     @cached_property
     def attribution(self) -> list[str]:
@@ -111,7 +113,7 @@ class MitsubaXmlExporter(Exporter):
             raise ValueError("the Mitsuba XML export needs a camera")
         # textures as the renderer loads them (its own size limit), so the scene renders the same
         write_mitsuba_xml(target, item.shape, item.materials, item.envmap, item.camera,
-                          uv_transforms=item.uv_transforms, size=item.size, spp=item.spp,
+                          uv_transforms=item.uv_transforms, size=item.size, spp=item.spp, seed=item.seed,
                           resolve_ref=item.resolve_ref)
 
 

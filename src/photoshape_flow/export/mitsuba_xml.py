@@ -11,12 +11,17 @@ had ``mi.xml.dict_to_xml``) cannot serialise in-memory objects (mitsuba-renderer
 - each ``mi.Bitmap`` (float32, resampled as rendered) is written as OpenEXR and referenced by
   filename; sRGB-flagged ones are linearised first (EXR has no gamma flag; Mitsuba would otherwise
   read the encoded values as linear), so reloading gives the texels that were rendered;
-- ``transform_relocate`` then copies every referenced file (PLYs, EXRs, the envmap) into
-  ``meshes/`` and ``textures/`` beside the XML, so the folder is self-contained and relocatable.
+- ``transform_relocate`` then copies every referenced file (PLYs, EXRs) into ``meshes/`` and
+  ``textures/`` beside the XML, so the folder is self-contained and relocatable.
 
-The film size and sample count are XML defaults (``$resx``/``$spp`` style parameters written by
-Mitsuba), so ``mitsuba scene.xml`` renders the exported view; pass ``seed=`` to ``mi.render`` for
-the same noise.
+The scene is the one `Renderer.beauty` renders, not only the one `build_scene` describes: the
+envmap is written as the renderer's persistent scene lights with it (resampled to
+`render.pool.ENVMAP_RESOLUTION`; without an envmap, the pool's constant-radiance envmap rather than
+a ``constant`` emitter, which draws other noise), and the sampler carries the render's `seed` as its
+base seed. So the XML reloaded and rendered with Mitsuba's defaults (``mitsuba scene.xml``, or
+``mi.render(mi.load_file(...))`` at seed 0) gives the image that it accompanies, noise included, when
+`camera`, `size`, `spp` and `seed` are those of that render. The film size and sample count are XML
+defaults (``$resx``/``$spp`` style parameters written by Mitsuba).
 """
 
 from __future__ import annotations
@@ -72,6 +77,24 @@ def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str], nam
     return value
 
 
+def rendered_envmap(envmap: EnvmapSpec | None) -> dict[str, Any]:
+    """The envmap emitter as `Renderer.beauty` lights with it (`render.pool`): resampled data, same
+    scale and rotation; radiance 1 everywhere when `envmap` is None."""
+    import math
+
+    from photoshape_flow.render.pool import envmap_data
+    from photoshape_flow.render.runtime import ensure_mitsuba
+
+    mi = ensure_mitsuba()
+    data = envmap_data(envmap)[:, 1:-1]  # without the plugin's wrap-around columns: it adds them again
+    return {
+        "type": "envmap",
+        "bitmap": mi.Bitmap(data.copy()),
+        "scale": float(envmap.scale) if envmap is not None else 1.0,
+        "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], math.degrees(envmap.rotation if envmap else 0.0)),
+    }
+
+
 def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: str | Path,
                  names: dict[str, str] | None = None) -> Path:
     """Write a `build_scene` dict as XML + PLY meshes + EXR textures.
@@ -118,11 +141,12 @@ def write_mitsuba_xml(
     floor: bool = False,
     resolve_ref: ResolveRef | None = None,
     max_texture_size: int | None = None,
+    seed: int = 0,
 ) -> Path:
     """Export the beauty scene of `shape` (built-ins resolved with `resolve_ref`) as Mitsuba XML.
 
     `max_texture_size` defaults to the renderer's (`SceneOptions`), so the XML holds the texels
-    that the PhotoShape renders used.
+    that the PhotoShape renders used; `seed` is the sampler's base seed (see the module docstring).
     """
     from photoshape_flow.render.scene import SceneOptions, build_scene, material_bsdf, part_key
 
@@ -133,6 +157,8 @@ def write_mitsuba_xml(
         uv_transforms=tuple(uv_transforms) if uv_transforms is not None else None,
     )
     scene = build_scene(shape, specs, envmap, camera, options)
+    scene["sensor"]["sampler"]["seed"] = int(seed)
+    scene["emitter"] = rendered_envmap(envmap)
     bsdfs = {
         part_key(part.index): material_bsdf(spec, max_texture_size)
         for part, spec in zip(shape.parts, specs, strict=True)

@@ -18,7 +18,13 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
-from photoshape_flow.pipeline.photoshapes import DEFAULT_METHOD, candidate_method_keys, choose_envmap, load_photoshape
+from photoshape_flow.pipeline.photoshapes import (
+    DEFAULT_METHOD,
+    candidate_method_keys,
+    choose_envmap,
+    exemplar_render,
+    load_photoshape,
+)
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -83,8 +89,9 @@ def export_candidates(
                 env = session.get(m.Envmap, envmap_id) if envmap_id is not None else None
                 item = load_photoshape(session, store, pair_id, method_key, env)
             target = Path(out_dir) / f"{pair_id}-{safe_key(method_key)}"
+            camera, seed = exemplar_render(item, settings.seed)  # the framing and noise of the gallery's render
             written = export_photoshape(target, item.mesh, item.materials, item.uv_transforms, item.document,
-                                        formats=formats, envmap=item.envmap, camera=item.camera,
+                                        formats=formats, envmap=item.envmap, camera=camera, seed=seed,
                                         resolve_ref=store.resolve, size=size, spp=spp)
             result.update(status=STATUS_OK, error=None, files={k: str(v) for k, v in written.items()})
         except Exception as exc:
