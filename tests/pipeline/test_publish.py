@@ -205,7 +205,7 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     result = runner.invoke(app, ["export", str(ids["good"]), "--out", str(out), "--format", "glb,obj", "--json"])
     assert result.exit_code == 0, result.output
     folder = out / f"{ids['good']}-classifier-{ids['classifier']}"
-    assert (folder / "photoshape.glb").is_file() and (folder / "obj" / "photoshape.obj").is_file()
+    assert (folder / "photoshape.glb").is_file() and (folder / "photoshape.obj").is_file()
     assert json.loads((folder / "assignment.json").read_text())["pair_id"] == ids["good"]
     # every candidate: the broken one is reported, the good one still written
     result = runner.invoke(app, ["export", "--out", str(tmp_path / "all"), "--format", "glb"])

@@ -138,21 +138,23 @@ class _Assets:
 
 
 def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
-    """Copy a single-file download, or zip the folder of a multi-file format; returns the site path."""
+    """Copy a single-file download, or zip what a multi-file format needs (`bundle.format_files`);
+    returns the site path."""
+    from photoshape_flow.export.bundle import format_files
+
     source = Path(source)
     folder = root / "downloads" / slug
     folder.mkdir(parents=True, exist_ok=True)
     if (fmt == SIDECAR or EXPORTERS[fmt].single_file) and source.is_file():
         shutil.copyfile(source, folder / source.name)
         return f"downloads/{slug}/{source.name}"
-    base = source if source.is_dir() else source.parent
-    if not base.is_dir():
+    files = format_files(source, fmt)
+    if not files:
         return None
     archive = folder / f"{fmt}.zip"
     with zipfile.ZipFile(archive, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for path in sorted(base.rglob("*")):
-            if path.is_file():
-                zf.write(path, f"{fmt}/{path.relative_to(base).as_posix()}")
+        for path, name in files:
+            zf.write(path, name)
     return f"downloads/{slug}/{archive.name}"
 
 

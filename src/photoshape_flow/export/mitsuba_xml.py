@@ -8,7 +8,8 @@ had ``mi.xml.dict_to_xml``) cannot serialise in-memory objects (mitsuba-renderer
 - each part's ``mi.Mesh`` (its UVs already carry the texture-scale formula, the jitter and
   Mitsuba's v flip) is written with ``Mesh.write_ply`` and replaced by a ``ply`` shape with the
   part's BSDF dict (`render.scene.material_bsdf`);
-- each ``mi.Bitmap`` (float32, resampled as rendered) is written as OpenEXR and referenced by
+- each ``mi.Bitmap`` (float32, resampled as rendered) is written as OpenEXR named by its texels
+  (so a material used by several parts, and equal constant maps, are one file) and referenced by
   filename; sRGB-flagged ones are linearised first (EXR has no gamma flag; Mitsuba would otherwise
   read the encoded values as linear), so reloading gives the texels that were rendered;
 - ``transform_relocate`` then copies every referenced file (PLYs, EXRs) into ``meshes/`` and
@@ -31,8 +32,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.export.pbr import ResolveRef
-from photoshape_flow.export.text import safe_name
+from photoshape_flow.export.pbr import ResolveRef, content_file_name
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, material_from_builtin
 
@@ -52,25 +52,31 @@ def concrete_materials(shape: Any, materials: Sequence[Any] | None, resolve_ref:
     return out
 
 
-def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str], name: str = "texture") -> Any:
-    """Copy of a scene-dict value with Bitmaps written to EXR files named after where they sit
-    (``<material>_base_color.exr``), each Bitmap object once."""
+def _write_exr(bitmap: Any, mi: Any, stage: Path) -> str:
+    """Write a Bitmap as OpenEXR named by its texels (`pbr.content_file_name`): identical textures
+    (a material on several parts, constant and flat maps) become one file; returns the path."""
+    import numpy as np
+
+    if bitmap.srgb_gamma():  # EXR is linear by definition: linearise, or the flag is lost
+        bitmap = bitmap.convert(bitmap.pixel_format(), mi.Struct.Type.Float32, False)
+    texels = np.asarray(bitmap)
+    target = stage / content_file_name(repr(texels.shape).encode() + texels.tobytes(), "exr")
+    if not target.exists():
+        bitmap.write(str(target))
+    return str(target)
+
+
+def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str]) -> Any:
+    """Copy of a scene-dict value with Bitmaps written to content-named EXR files, each Bitmap object once."""
     if isinstance(value, dict):
         out: dict[str, Any] = {}
         for key, item in value.items():
             if key == "bitmap" and isinstance(item, mi.Bitmap):
                 if id(item) not in written:
-                    target = stage / f"{safe_name(name, 'texture')}.exr"
-                    if target.exists():
-                        target = stage / f"{safe_name(name, 'texture')}_{len(written)}.exr"
-                    if item.srgb_gamma():  # EXR is linear by definition: linearise, or the flag is lost
-                        item = item.convert(item.pixel_format(), mi.Struct.Type.Float32, False)
-                    item.write(str(target))
-                    written[id(value["bitmap"])] = str(target)
-                out["filename"] = written[id(value["bitmap"])]
+                    written[id(item)] = _write_exr(item, mi, stage)
+                out["filename"] = written[id(item)]
             else:
-                child = name if key in ("bsdf", "nested_bsdf") else f"{name}_{key}"
-                out[key] = _serialisable(item, mi, stage, written, child)
+                out[key] = _serialisable(item, mi, stage, written)
         return out
     if isinstance(value, mi.Object):
         raise TypeError(f"cannot write a {type(value).__name__} object to Mitsuba XML")
@@ -95,12 +101,10 @@ def rendered_envmap(envmap: EnvmapSpec | None) -> dict[str, Any]:
     }
 
 
-def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: str | Path,
-                 names: dict[str, str] | None = None) -> Path:
+def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: str | Path) -> Path:
     """Write a `build_scene` dict as XML + PLY meshes + EXR textures.
 
-    `bsdfs`: part key -> the part's BSDF dict (the meshes in `scene` hold instantiated BSDFs);
-    `names`: part key -> material name, used to name the texture files.
+    `bsdfs`: part key -> the part's BSDF dict (the meshes in `scene` hold instantiated BSDFs).
     """
     from photoshape_flow.render.runtime import ensure_mitsuba
 
@@ -117,10 +121,10 @@ def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: 
                 value.write_ply(str(ply))
                 entry: dict[str, Any] = {"type": "ply", "filename": str(ply)}
                 if key in bsdfs:
-                    entry["bsdf"] = _serialisable(bsdfs[key], mi, stage, written, (names or {}).get(key, key))
+                    entry["bsdf"] = _serialisable(bsdfs[key], mi, stage, written)
                 plain[key] = entry
             else:
-                plain[key] = _serialisable(value, mi, stage, written, key)
+                plain[key] = _serialisable(value, mi, stage, written)
         config = mi.parser.ParserConfig(mi.variant())
         state = mi.parser.parse_dict(config, plain)
         mi.parser.transform_relocate(config, state, str(out.parent))
@@ -164,5 +168,4 @@ def write_mitsuba_xml(
         for part, spec in zip(shape.parts, specs, strict=True)
         if len(part.faces)
     }
-    names = {part_key(part.index): spec.name for part, spec in zip(shape.parts, specs, strict=True)}
-    return scene_to_xml(scene, bsdfs, path, names)
+    return scene_to_xml(scene, bsdfs, path)
