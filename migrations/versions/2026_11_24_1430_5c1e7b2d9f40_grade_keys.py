@@ -42,7 +42,8 @@ def _backfill(conn: sa.Connection) -> None:
             "AND key LIKE '%/exemplar' ORDER BY id DESC LIMIT 1"), {"p": pair_id}).scalar()
         if key and key.count("/") >= 2:
             published[pair_id] = key.split("/", 1)[1].rsplit("/", 1)[0]
-    keys = assignment_set_keys(Session(bind=conn), list(published.items()))
+    with Session(bind=conn) as session:
+        keys = assignment_set_keys(session, list(published.items()))
     for grade_id, pair_id in grades:
         method_key = published.get(pair_id)
         set_key = keys.get((pair_id, method_key)) if method_key else None

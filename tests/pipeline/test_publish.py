@@ -240,6 +240,15 @@ def test_published_xml_renders_the_gallery_image(db_url, store, tmp_path):
     assert (ours & theirs).sum() / (ours | theirs).sum() >= 0.99
     assert np.abs(srgb.astype(np.float32) - published.astype(np.float32)).mean() <= 2.0
     assert 'value="24"' in xml.read_text() and row.params["camera"]["fov"] < 50.0  # framed, not the pair's fov
+    # `photoshape export` on demand writes the same scene: the published render's framing, film and seed
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+
+    result = CliRunner().invoke(app, ["export", str(good), "--out", str(tmp_path / "out"), "--format", "xml"])
+    assert result.exit_code == 0, result.output
+    again = tmp_path / "out" / f"{good}-{mk.replace(':', '-')}" / "mitsuba" / "scene.xml"
+    assert again.read_text() == xml.read_text()
 
 
 def _rerank_with_a_new_classifier(url: str, pair_id: int) -> int:
