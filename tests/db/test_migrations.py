@@ -70,3 +70,30 @@ def test_exemplar_match_revision_drops_the_old_reverse_index_rows(any_db_url: st
         matches = conn.execute(sa.text("SELECT COUNT(*) FROM exemplar_match")).scalar_one()
     engine.dispose()
     assert left == ["dedupe-hog", "hog-insensitive9"] and matches == 0
+
+
+def test_grade_keys_revision_backfills_from_the_published_method(any_db_url: str) -> None:
+    """Grades of a published pair get its method and assignment-set key; others stay legacy (NULL)."""
+    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+
+    migrate.upgrade(any_db_url)
+    engine = make_engine(any_db_url)
+    with Session(engine) as session, session.begin():
+        ids = seed(session)  # one grade on the pair, no render yet
+    method_key = f"classifier:{ids['classifier']}"
+    grade_keys = sa.text("SELECT method_key, assignment_set FROM grade")
+    migrate.downgrade(any_db_url, "90238d22ce60")
+    migrate.upgrade(any_db_url)
+    with engine.connect() as conn:
+        assert conn.execute(grade_keys).one() == (None, None)  # never published: a legacy grade
+    migrate.downgrade(any_db_url, "90238d22ce60")
+    with engine.begin() as conn:
+        conn.execute(sa.text(
+            "INSERT INTO rendering (kind, key, pair_id, params, blobs, status, params_hash) "
+            "VALUES ('photoshape', :k, :p, '{}', '{}', 'ok', '')"), {"k": f"{ids['pair']}/{method_key}/exemplar",
+                                                                   "p": ids["pair"]})
+    migrate.upgrade(any_db_url)
+    with Session(engine) as session:
+        expected = assignment_set_keys(session, [(ids["pair"], method_key)])[(ids["pair"], method_key)]
+        assert tuple(session.execute(grade_keys).one()) == (method_key, expected)
+    engine.dispose()

@@ -52,7 +52,7 @@ def test_bundle_writes_formats_and_sidecar(tmp_path, tiny_shape, tiny_materials)
     assert sidecar["license_summary"] == ["CC-BY-4.0", "CC0-1.0", "ShapeNet terms"]
     attribution = (tmp_path / "3" / "ATTRIBUTION.txt").read_text()
     assert "exemplar photo-9: CC-BY-4.0, A. Photographer" in attribution
-    assert "shape chair-a: ShapeNet terms" in (tmp_path / "3" / "obj" / "photoshape.mtl").read_text()
+    assert "shape chair-a: ShapeNet terms" in (tmp_path / "3" / "photoshape.mtl").read_text()
     # re-export replaces the folder atomically (no leftovers, no temporary siblings)
     export_photoshape(tmp_path / "3", tiny_shape, None, None, doc, formats=["glb"])
     assert sorted(p.name for p in (tmp_path / "3").iterdir()) == ["ATTRIBUTION.txt", "assignment.json",

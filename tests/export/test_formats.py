@@ -51,3 +51,41 @@ def test_a_registered_class_is_a_format(tmp_path: Path, tiny_shape, monkeypatch)
     assert href == "downloads/7/names.zip"
     with zipfile.ZipFile(tmp_path / "site" / href) as zf:
         assert zf.namelist() == ["names/parts.txt"]
+
+
+def test_identical_textures_are_written_once_per_bundle(tmp_path: Path, tiny_shape, tiny_materials) -> None:
+    """One material on both parts, exported in every format: each distinct texture is one file, named
+    by content, that the glTF and the OBJ both reference; the downloads carry what they reference."""
+    import hashlib
+    import json
+    import re
+
+    from photoshape_flow.render.camera import Camera
+
+    oak = tiny_materials[0]
+    written = export_photoshape(tmp_path / "7", tiny_shape, [oak, oak], None, DOCUMENT, formats=list(EXPORTERS),
+                                camera=Camera(0.5, 0.3, 2.0, 40.0), size=8, spp=1)
+    bundle = tmp_path / "7"
+    images = [p for p in bundle.rglob("*") if p.suffix in (".png", ".jpg", ".exr")]
+    digests = [hashlib.sha256(p.read_bytes()).hexdigest() for p in images]
+    assert len(set(digests)) == len(digests) > 0  # no two texture files hold the same bytes
+    shared = sorted(p.name for p in (bundle / "textures").iterdir())
+    assert shared and all(re.fullmatch(r"[0-9a-f]{16}\.png", name) for name in shared)
+    gltf_uris = {image["uri"] for image in json.loads(written["gltf"].read_text())["images"]}
+    mtl_refs = set(re.findall(r"(?<!\S)(\S*textures/\S+)", (bundle / "photoshape.mtl").read_text()))
+    assert gltf_uris and mtl_refs and all(ref.startswith("textures/") for ref in gltf_uris | mtl_refs)
+    assert all((written["gltf"].parent / ref).is_file() for ref in gltf_uris | mtl_refs)
+    basecolor = re.search(r"^map_Kd (\S+)$", (bundle / "photoshape.mtl").read_text(), re.M)
+    assert basecolor is not None and basecolor.group(1) in gltf_uris  # both formats use the one copy
+    xml = written["xml"].read_text()
+    assert len(re.findall(r'value="(textures/[0-9a-f]{16}\.exr)"', xml)) > len(set(re.findall(
+        r'value="(textures/[0-9a-f]{16}\.exr)"', xml)))  # both parts name the same EXR files
+    # a download of the glTF is what it names, transitively, and nothing of the other formats
+    href = _download(tmp_path / "site", "7", "gltf", written["gltf"])
+    with zipfile.ZipFile(tmp_path / "site" / str(href)) as zf:
+        names = set(zf.namelist())
+        zf.extractall(tmp_path / "unpacked")
+    assert names == {"gltf/photoshape.gltf", "gltf/photoshape.bin", *(f"gltf/{ref}" for ref in gltf_uris)}
+    href = _download(tmp_path / "site", "7", "obj", written["obj"])
+    with zipfile.ZipFile(tmp_path / "site" / str(href)) as zf:
+        assert set(zf.namelist()) == {"obj/photoshape.obj", "obj/photoshape.mtl", *(f"obj/{ref}" for ref in mtl_refs)}

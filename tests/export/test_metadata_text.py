@@ -67,7 +67,7 @@ def test_exports_keep_hostile_metadata_on_one_line(tmp_path: Path, tiny_shape, t
     out = tmp_path / "out"
     texts = {p.relative_to(out).as_posix(): p.read_text() for p in out.rglob("*")
              if p.suffix in (".obj", ".mtl", ".gltf", ".xml", ".txt", ".json")}
-    assert {"obj/photoshape.obj", "obj/photoshape.mtl", "gltf/photoshape.gltf", "mitsuba/scene.xml",
+    assert {"photoshape.obj", "photoshape.mtl", "photoshape.gltf", "mitsuba/scene.xml",
             "ATTRIBUTION.txt", "assignment.json"} <= set(texts)
     for name, text in texts.items():
         if name != "assignment.json":  # JSON escapes control characters itself; kept verbatim there
@@ -75,7 +75,7 @@ def test_exports_keep_hostile_metadata_on_one_line(tmp_path: Path, tiny_shape, t
         live = [line for line in text.splitlines() if not line.lstrip().startswith("#")]
         assert not any(line.lstrip().startswith((INJECTED, "usemtl evil", "f 1 2 3")) for line in live), name
 
-    obj, mtl = texts["obj/photoshape.obj"], texts["obj/photoshape.mtl"]
+    obj, mtl = texts["photoshape.obj"], texts["photoshape.mtl"]
     for text, allowed in ((obj, OBJ_STATEMENTS), (mtl, MTL_STATEMENTS)):
         statements = {line.split()[0] for line in text.splitlines() if line and not line.startswith("#")}
         assert statements <= allowed, statements - allowed
@@ -86,7 +86,7 @@ def test_exports_keep_hostile_metadata_on_one_line(tmp_path: Path, tiny_shape, t
     assert len(attribution) == len(DOCUMENT["licenses"])
     assert attribution[1] == "material oak_01: CC-BY-4.0 usemtl evil, B C"
 
-    gltf = json.loads(texts["gltf/photoshape.gltf"])
+    gltf = json.loads(texts["photoshape.gltf"])
     assert not any(FORBIDDEN.search(s) or "\n" in s or "\r" in s for s in _strings(gltf))
     assert gltf["asset"]["copyright"].count(INJECTED) == 4  # name, licence, attribution, url: as text
     glb = (out / "photoshape.glb").read_bytes()

@@ -174,17 +174,19 @@ def test_gallery_of_published_candidates(db_url, store, tmp_path):
     with session_scope(db_url) as s:
         record_grade(s, ids["good"], "acceptable", note="seat a bit dark")
     result = CliRunner().invoke(app, ["gallery", str(tmp_path / "site")])
-    assert result.exit_code == 0 and "2 PhotoShape page(s)" in result.output, result.output
+    assert result.exit_code == 0 and "1 published PhotoShape(s); 1 candidate(s) without a render" in result.output, \
+        result.output
     index = tmp_path / "site" / "index.html"
     html = index.read_text()
     assert "tiny chair" in html and "acceptable" in html and "CC-BY-4.0" in html
     pages = sorted((tmp_path / "site" / "pairs").glob("*.html"))
-    assert len(pages) == 2  # the broken candidate is listed too, without renders
+    assert len(pages) == 2  # the broken candidate has its page too, without renders
     good_page = next(p for p in pages if p.name.startswith(f"{ids['good']}-"))
     text = good_page.read_text()
     assert "seat a bit dark" in text and "oak_01" in text and "80.0%" in text and "photoshape.glb" in text
     try:
-        report = check_pages([index, good_page], screenshot=tmp_path / "gallery.png")
+        report = check_pages([index, good_page, tmp_path / "site" / "candidates.html"],
+                             screenshot=tmp_path / "gallery.png")
     except ProgramMissing as exc:
         pytest.skip(str(exc))
     assert problems(report) == []
@@ -203,7 +205,7 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     result = runner.invoke(app, ["export", str(ids["good"]), "--out", str(out), "--format", "glb,obj", "--json"])
     assert result.exit_code == 0, result.output
     folder = out / f"{ids['good']}-classifier-{ids['classifier']}"
-    assert (folder / "photoshape.glb").is_file() and (folder / "obj" / "photoshape.obj").is_file()
+    assert (folder / "photoshape.glb").is_file() and (folder / "photoshape.obj").is_file()
     assert json.loads((folder / "assignment.json").read_text())["pair_id"] == ids["good"]
     # every candidate: the broken one is reported, the good one still written
     result = runner.invoke(app, ["export", "--out", str(tmp_path / "all"), "--format", "glb"])
@@ -213,3 +215,125 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     assert bad.exit_code == 1 and "unknown export format(s) fbx; valid: glb, gltf, xml, obj" in bad.output
     none = runner.invoke(app, ["export", "--out", str(out), "--method", "color-match"])
     assert none.exit_code == 1 and "no candidates" in none.output
+
+
+@pytest.mark.render
+def test_published_xml_renders_the_gallery_image(db_url, store, tmp_path):
+    """The exported Mitsuba XML, reloaded, renders the published exemplar-view image: same framing
+    (silhouette IoU), same materials, light and noise (mean absolute error at equal spp and seed)."""
+    from photoshape_flow.pipeline.downloads import export_dir
+    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.render.runtime import ensure_mitsuba
+    from photoshape_flow.render.tonemap import composite
+
+    ids = seed(db_url, store, tmp_path)
+    mk, good = f"classifier:{ids['classifier']}", ids["good"]
+    run_publish(views=0, size=24, spp=4, formats=("xml",))
+    row = _renderings(db_url)[("photoshape", f"{good}/{mk}/exemplar")]
+    published, coverage = store.load_image(row.blobs["srgb"]), store.load_image(row.blobs["alpha"])
+    mi = ensure_mitsuba()
+    xml = export_dir(good, mk) / "mitsuba" / "scene.xml"
+    image = np.asarray(mi.render(mi.load_file(str(xml))))  # Mitsuba's defaults: the XML's film, spp and seed
+    _, srgb = composite(image[..., :3], image[..., 3], "white")
+    ours, theirs = np.asarray(coverage) > 127, image[..., 3] > 0.5
+    assert theirs.mean() > 0.1  # the shape is in view
+    assert (ours & theirs).sum() / (ours | theirs).sum() >= 0.99
+    assert np.abs(srgb.astype(np.float32) - published.astype(np.float32)).mean() <= 2.0
+    assert 'value="24"' in xml.read_text() and row.params["camera"]["fov"] < 50.0  # framed, not the pair's fov
+    # `photoshape export` on demand writes the same scene: the published render's framing, film and seed
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+
+    result = CliRunner().invoke(app, ["export", str(good), "--out", str(tmp_path / "out"), "--format", "xml"])
+    assert result.exit_code == 0, result.output
+    again = tmp_path / "out" / f"{good}-{mk.replace(':', '-')}" / "mitsuba" / "scene.xml"
+    assert again.read_text() == xml.read_text()
+
+
+def _rerank_with_a_new_classifier(url: str, pair_id: int) -> int:
+    """A newer classifier's rank-1 rows for `pair_id` (other materials): returns its id."""
+    with session_scope(url) as s:
+        classifier = m.Classifier(name="clf-2", kind="material", architecture="resnet34")
+        s.add(classifier)
+        s.flush()
+        old = s.execute(sa.select(m.Assignment).where(m.Assignment.pair_id == pair_id, m.Assignment.rank == 1)
+                        .order_by(m.Assignment.part_id)).scalars().all()
+        materials = [a.material_id for a in old][::-1]  # swapped: another PhotoShape of the same pair
+        for a, material_id in zip(old, materials, strict=True):
+            s.add(m.Assignment(pair_id=pair_id, part_id=a.part_id, method="classifier", classifier_id=classifier.id,
+                               method_key=f"classifier:{classifier.id}", rank=1, material_id=material_id,
+                               score=0.5, substance=a.substance))
+        return classifier.id
+
+
+def test_grade_belongs_to_the_photoshape_it_was_given_to(db_url, store, tmp_path):
+    """A new classifier's PhotoShape of a graded pair shows ungraded; the old grade stays, with its key."""
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+
+    ids = seed(db_url, store, tmp_path)
+    good, old_key = ids["good"], f"classifier:{ids['classifier']}"
+    runner = CliRunner()
+    result = runner.invoke(app, ["grade", str(good), "wrong_color", "--note", "seat too red"])
+    assert result.exit_code == 0 and f"pair {good} ({old_key}): graded wrong_color" in result.output, result.output
+    new_key = f"classifier:{_rerank_with_a_new_classifier(db_url, good)}"
+
+    result = runner.invoke(app, ["gallery", str(tmp_path / "site")])
+    assert result.exit_code == 0, result.output
+    page = (tmp_path / "site" / "pairs" / f"{good}-{new_key.replace(':', '-')}.html").read_text()
+    assert "ungraded" in page and "seat too red" not in page and "wrong_color</span>" not in page
+    with session_scope(db_url) as s:
+        rows = s.execute(sa.select(m.Grade.pair_id, m.Grade.method_key, m.Grade.assignment_set, m.Grade.label)).all()
+        shown = assignment_set_keys(s, [(good, old_key)])[(good, old_key)]
+    assert [tuple(r) for r in rows] == [(good, old_key, shown, "wrong_color")]  # still there, with its key
+    # the old PhotoShape still carries its grade; grading the new one adds a row instead of replacing it
+    result = runner.invoke(app, ["gallery", str(tmp_path / "old"), "--method", old_key])
+    assert "seat too red" in (tmp_path / "old" / "pairs" / f"{good}-{old_key.replace(':', '-')}.html").read_text()
+    assert runner.invoke(app, ["grade", str(good), "good"]).exit_code == 0
+    with session_scope(db_url) as s:
+        labels = s.execute(sa.select(m.Grade.method_key, m.Grade.label).order_by(m.Grade.id)).all()
+    assert [tuple(r) for r in labels] == [(old_key, "wrong_color"), (new_key, "good")]
+
+
+@pytest.mark.render
+def test_gallery_opens_on_published_photoshapes_and_publishes_on_demand(db_url, store, tmp_path):
+    """index.html lists rendered PhotoShapes; the others wait on candidates.html with the command that
+    renders them, and `photoshape run publish --pair N` (whatever the pair's rank) does."""
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+
+    ids = seed(db_url, store, tmp_path)
+    good, mk = ids["good"], f"classifier:{ids['classifier']}"
+    with session_scope(db_url) as s:
+        s.get(m.Pair, good).rank = 40  # beyond any profile's max_rank: only --pair publishes it
+    runner = CliRunner()
+    site = get_settings_data_root() / "gallery"
+    small = ["--set", "publish.views=0", "--set", "publish.size=16", "--set", "publish.spp=2",
+             "--set", "publish.formats=glb"]
+    result = runner.invoke(app, ["run", "publish", *small])
+    assert result.exit_code == 0, result.output
+    index, candidates = (site / "index.html").read_text(), (site / "candidates.html").read_text()
+    assert f'data-pair="{good}"' not in index and "No published PhotoShapes yet" in index
+    assert f"photoshape run publish --pair {good}" in candidates
+
+    result = runner.invoke(app, ["run", "publish", "--pair", str(good), "--pair", "999", *small])
+    assert result.exit_code == 0, result.output
+    assert "pair 999: not a PhotoShape candidate" in result.output and "pairs published" in result.output
+    index, candidates = (site / "index.html").read_text(), (site / "candidates.html").read_text()
+    assert f'data-pair="{good}"' in index and "img/" in index and "1 more candidate without a render" in index
+    assert f"--pair {good}" not in candidates and f"--pair {ids['broken']}" in candidates
+    assert _renderings(db_url)[("photoshape", f"{good}/{mk}/exemplar")].status == "ok"
+    bad = runner.invoke(app, ["run", "coarse-alignment", "--pair", str(good)])
+    assert bad.exit_code == 1 and "--pair applies to the publish stage only" in bad.output
+    none = runner.invoke(app, ["run", "publish", "--pair", "999"])
+    assert none.exit_code == 1 and "no pair to publish" in none.output
+
+
+def get_settings_data_root() -> Path:
+    from photoshape_flow.config import get_settings
+
+    return get_settings().data_root

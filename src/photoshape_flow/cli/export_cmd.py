@@ -22,8 +22,10 @@ def export(
     ),
     formats: str = typer.Option(",".join(DEFAULT_FORMATS), "--format", "-f",
                                 help=f"Comma-separated: {', '.join(EXPORTERS)}."),
-    size: int = typer.Option(512, min=8, help="Film size written into the Mitsuba XML."),
-    spp: int = typer.Option(128, min=1, help="Samples per pixel written into the Mitsuba XML."),
+    size: int | None = typer.Option(None, min=8, help="Film size written into the Mitsuba XML (default: the "
+                                    "published render's, so the scene renders it again; 512 when unpublished)."),
+    spp: int | None = typer.Option(None, min=1, help="Samples per pixel written into the Mitsuba XML (default: "
+                                   "the published render's; 128 when unpublished)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""

@@ -15,13 +15,17 @@ def gallery(
     sheet: Path | None = typer.Option(None, "--sheet", help="Also write a contact-sheet PNG of the best candidates."),
     sheet_rows: int = typer.Option(6, "--sheet-rows", min=1, help="Candidates on the contact sheet."),
 ) -> None:
-    """Write the gallery: exemplars, built-in and PhotoShape renders, materials, grades, downloads, licences."""
+    """Write the gallery: exemplars, built-in and PhotoShape renders, materials, grades, downloads, licences.
+
+    index.html lists the published PhotoShapes (those with a render); candidates.html the others, each
+    with the command that renders it (photoshape run publish --pair N).
+    """
     require_database()
     from photoshape_flow.pipeline.gallery_site import write_contact_sheet, write_gallery_site
 
-    index = write_gallery_site(out, method)
-    pages = len(list((out / "pairs").glob("*.html")))
-    console.print(f"gallery: {pages} PhotoShape page(s); open {index}")
+    site = write_gallery_site(out, method)
+    console.print(f"gallery: {site.published} published PhotoShape(s); {site.waiting} candidate(s) without a "
+                  f"render on {site.index.parent / 'candidates.html'}; open {site.index}", highlight=False)
     if sheet is not None:
         try:
             path = write_contact_sheet(sheet, method, rows=sheet_rows)

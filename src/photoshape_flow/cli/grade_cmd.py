@@ -12,14 +12,20 @@ def grade(
     pair: int = typer.Argument(..., help="Pair id of the PhotoShape."),
     label: str = typer.Argument(..., help=f"One of: {', '.join(GRADES)}."),
     note: str | None = typer.Option(None, "--note", "-n", help="Free-text remark shown in the gallery."),
-    grader: str = typer.Option("user", "--grader", "-g", help="Who grades; one grade per grader and pair."),
+    grader: str = typer.Option("user", "--grader", "-g", help="Who grades; one grade per grader and PhotoShape."),
+    method: str = typer.Option("classifier", "--method", "-m",
+                               help="Whose PhotoShape of the pair: a method (classifier: the newest classifier's) "
+                               "or an exact method key such as classifier:3."),
 ) -> None:
-    """Grade a PhotoShape; re-grading by the same grader replaces the earlier grade.
+    """Grade the pair's PhotoShape as it is now; re-grading it by the same grader replaces the earlier grade.
 
-    Grades are queryable in SQL: SELECT * FROM grade JOIN photoshape_candidate USING (pair_id).
+    The grade is keyed by what it was given to (the method key and the assignment set shown), so a
+    new classifier's PhotoShape of the pair starts ungraded and the old grade stays. Queryable in
+    SQL: SELECT pair_id, method_key, label, grader FROM grade.
     """
     require_database()
     from photoshape_flow.config import get_settings
+    from photoshape_flow.db import models as m
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.grading import record_grade
 
@@ -27,10 +33,11 @@ def grade(
         fail(f"unknown grade {label!r}; valid grades: {', '.join(GRADES)}")
     try:
         with session_scope(get_settings().resolved_database_url) as session:
-            grade_id = record_grade(session, pair, label, note, grader)
+            grade_id = record_grade(session, pair, label, note, grader, method)
+            method_key = session.get(m.Grade, grade_id).method_key
     except ValueError as exc:
         fail(str(exc))
-    console.print(f"pair {pair}: graded {label} by {grader} (grade {grade_id})")
+    console.print(f"pair {pair} ({method_key}): graded {label} by {grader} (grade {grade_id})", highlight=False)
 
 
 def register(app: typer.Typer) -> None:

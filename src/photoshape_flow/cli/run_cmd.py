@@ -45,6 +45,8 @@ def run(
     overrides: list[str] = typer.Option(None, "--set", help="Override a profile field, e.g. training.epochs=3 "
                                         "(repeatable; --show-profile lists the fields)."),
     show_profile: bool = typer.Option(False, "--show-profile", help="Print the resolved profile's fields and exit."),
+    pairs: list[int] = typer.Option(None, "--pair", help="publish only: render and export these pairs' "
+                                    "PhotoShapes, whatever their rank (repeatable), then rewrite the gallery."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
@@ -54,6 +56,8 @@ def run(
     setup_logging(verbose)
     if stage != "all" and stage not in STAGE_NAMES:
         fail(f"unknown stage {stage!r}; choose from {', '.join(STAGE_NAMES)} or all")
+    if pairs and stage != "publish":
+        fail(f"--pair applies to the publish stage only, not {stage!r}")
     resolved = resolve_profile_or_fail(profile, overrides)
     if show_profile:
         for path, value in profile_fields(resolved.profile.to_dict()):
@@ -61,9 +65,45 @@ def run(
                 console.print(f"{path} = {value}", highlight=False)
         return
     require_database()
+    if pairs:
+        print_reports([publish_pairs(resolved, stage_context(), pairs)], title="pairs published")
+        return
     reports = run_all(resolved, stage_context(), names=None if stage == "all" else [stage],
                       on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
     print_reports(reports)
+
+
+def publish_pairs(resolved: Any, ctx: Any, pairs: Sequence[int]) -> StageReport:
+    """Publish the given pairs (a candidate the gallery lists without a render), then the gallery.
+
+    Recorded as a run like any other. A pair that is no PhotoShape candidate (unknown, excluded, or
+    without rank-1 assignments) gets one line and the others go on; none at all exits 1.
+    """
+    from photoshape_flow.pipeline.photoshapes import candidate_method_keys
+    from photoshape_flow.stages import WorkUnit, finish, run_stage
+    from photoshape_flow.stages.run import finish_run, record_report, start_run
+
+    wanted = sorted(set(pairs))
+    with ctx.session() as session:
+        found = {pair_id for pair_id, _ in candidate_method_keys(session, None, wanted)}
+    for pair_id in wanted:
+        if pair_id not in found:
+            console.print(f"[yellow]pair {pair_id}: not a PhotoShape candidate (unknown, excluded, or no rank-1 "
+                          "assignments: run inference first)[/]", highlight=False)
+    if not found:
+        fail("no pair to publish")
+    run_id = start_run(ctx, resolved, ["publish"], "cli")
+    try:
+        report = run_stage("publish", resolved, ctx, WorkUnit("pairs", tuple(sorted(found))))
+        gallery = finish("publish", resolved, ctx)
+        if gallery is not None:
+            report = report.merge(gallery)
+        record_report(ctx, run_id, report)
+    except BaseException as exc:
+        finish_run(ctx, run_id, f"{type(exc).__name__}: {exc}")
+        raise
+    finish_run(ctx, run_id, None)
+    return report
 
 
 def register(app: typer.Typer) -> None:

@@ -354,13 +354,22 @@ class Evaluation(Base):
 
 
 class Grade(TimestampMixin, Base):
-    """A person's verdict on a PhotoShape, from the original code's result taxonomy."""
+    """A person's verdict on a PhotoShape, from the original code's result taxonomy.
+
+    Keyed by what was graded, not by the pair alone: the method key and the assignment-set key
+    (`pipeline.photoshapes.assignment_set_keys`) of the rank-1 materials the PhotoShape showed, so
+    a new classifier's (or a re-ranked) PhotoShape of the same pair starts ungraded while the old
+    grade stays. NULL keys: a grade from before they were recorded whose PhotoShape is unknown.
+    """
 
     __tablename__ = "grade"
-    __table_args__ = (sa.UniqueConstraint("pair_id", "grader"),)
+    __table_args__ = (sa.UniqueConstraint("pair_id", "method_key", "assignment_set", "grader"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     pair_id: Mapped[int] = mapped_column(_fk("pair.id"), index=True)
+    method_key: Mapped[str | None] = mapped_column(sa.String(64), comment="the graded PhotoShape's method key")
+    assignment_set: Mapped[str | None] = mapped_column(
+        sa.String(64), comment="key of the rank-1 assignment set it showed; NULL: legacy grade")
     label: Mapped[str] = mapped_column(Short)
     note: Mapped[str | None] = mapped_column(sa.Text)
     grader: Mapped[str] = mapped_column(sa.String(64), default="user", server_default="user")

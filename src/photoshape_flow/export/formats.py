@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 
 SIDECAR = "assignment"
 SIDECAR_PATH = "assignment.json"
+SHARED_TEXTURES = "textures"  # the glTF's and OBJ's texture files, beside them, named by content
 
 
 @dataclass(frozen=True)
@@ -32,8 +33,9 @@ class ExportInput:
     """One PhotoShape as the writers take it.
 
     `materials[i]` / `uv_transforms[i]` belong to `shape.parts[i]` (None = built-in / no jitter).
-    `camera` is the view a scene format renders, `envmap` its light (None: constant white);
-    `max_texture_size` limits the textures of the interchange formats.
+    `camera` is the view a scene format renders, `envmap` its light (None: constant white), `size`,
+    `spp` and `seed` its film and sampler (those of the render it accompanies, so it renders the same
+    image); `max_texture_size` limits the textures of the interchange formats.
     """
 
     shape: Any
@@ -46,6 +48,7 @@ class ExportInput:
     size: int = 512
     spp: int = 128
     max_texture_size: int | None = 2048
+    seed: int = 0
 
     @cached_property
     def attribution(self) -> list[str]:
@@ -62,7 +65,12 @@ class ExportInput:
 
 
 class Exporter(ABC):
-    """One export format: its ``--format`` name, where it goes in an export folder, how to write it."""
+    """One export format: its ``--format`` name, where it goes in an export folder, how to write it.
+
+    The formats with texture files (glTF, OBJ) sit at the folder's top and write their textures
+    into the one ``textures/`` folder there, named by content (`pbr.content_file_name`): identical
+    textures are one file that both reference, without any ``../`` path (`export.bundle`).
+    """
 
     name: ClassVar[str]
     path: ClassVar[str]  # the main file, relative to a PhotoShape's export folder
@@ -77,7 +85,7 @@ class Exporter(ABC):
 
 class GltfExporter(Exporter):
     name = "gltf"
-    path = "gltf/photoshape.gltf"
+    path = "photoshape.gltf"
     description = "glTF + textures"
     default = False  # the GLB holds the same, in one file
     binary: ClassVar[bool] = False  # one .glb file instead of .gltf + .bin + textures
@@ -85,9 +93,12 @@ class GltfExporter(Exporter):
     def write(self, target: Path, item: ExportInput) -> None:
         from photoshape_flow.export.gltf import write_glb, write_gltf
 
-        writer = write_glb if self.binary else write_gltf
-        writer(target, item.shape, item.materials, item.uv_transforms, metadata=item.metadata,
-               resolve_ref=item.resolve_ref, max_texture_size=item.max_texture_size)
+        common = {"metadata": item.metadata, "resolve_ref": item.resolve_ref, "max_texture_size": item.max_texture_size}
+        if self.binary:  # one file: its textures are embedded
+            write_glb(target, item.shape, item.materials, item.uv_transforms, **common)
+        else:
+            write_gltf(target, item.shape, item.materials, item.uv_transforms, **common, texture_dir=SHARED_TEXTURES,
+                       content_names=True)
 
 
 class GlbExporter(GltfExporter):
@@ -111,20 +122,21 @@ class MitsubaXmlExporter(Exporter):
             raise ValueError("the Mitsuba XML export needs a camera")
         # textures as the renderer loads them (its own size limit), so the scene renders the same
         write_mitsuba_xml(target, item.shape, item.materials, item.envmap, item.camera,
-                          uv_transforms=item.uv_transforms, size=item.size, spp=item.spp,
+                          uv_transforms=item.uv_transforms, size=item.size, spp=item.spp, seed=item.seed,
                           resolve_ref=item.resolve_ref)
 
 
 class ObjExporter(Exporter):
     name = "obj"
-    path = "obj/photoshape.obj"
+    path = "photoshape.obj"
     description = "OBJ + MTL + textures"
 
     def write(self, target: Path, item: ExportInput) -> None:
         from photoshape_flow.export.obj import write_obj
 
         write_obj(target, item.shape, item.materials, item.uv_transforms, resolve_ref=item.resolve_ref,
-                  max_texture_size=item.max_texture_size, header=item.attribution)
+                  max_texture_size=item.max_texture_size, header=item.attribution, texture_dir=SHARED_TEXTURES,
+                  content_names=True)
 
 
 # in the order help texts and the gallery list them

@@ -8,7 +8,9 @@ per value, links only to http(s) URLs), since every name and licence shown is so
 
 Layout::
 
-    index.html              every PhotoShape, sortable by score, HOG distance, alignment IoU, grade
+    index.html              the published PhotoShapes (those with a render), sortable by score, HOG
+                            distance, alignment IoU, grade
+    candidates.html         the candidates without a render yet, each with the command that renders it
     pairs/<slug>.html       exemplar, built-in render, PhotoShape renders, parts, downloads, licences
     materials.html          the materials used, with substance, licence and how often they were chosen
     img/                    images, named by content hash
@@ -27,6 +29,8 @@ from typing import Any
 
 from photoshape_flow.export.formats import EXPORTERS, SIDECAR, SIDECAR_PATH
 from photoshape_flow.export.templating import render
+
+INDEX_PAGE, CANDIDATES_PAGE = "index.html", "candidates.html"
 
 GRADE_ORDER: dict[str, int] = {
     "good": 0, "acceptable": 1, "not_sure": 2, "limitation": 3, "wrong_ambiguous": 4, "wrong_color": 5,
@@ -78,6 +82,16 @@ class GalleryEntry:
         return f"{self.pair_id}-{key}"
 
     @property
+    def published(self) -> bool:
+        """Rendered: the gallery lists it on its index (the others wait on the candidates page)."""
+        return bool(self.renders)
+
+    @property
+    def publish_command(self) -> str:
+        """The command that renders and exports this candidate on demand."""
+        return f"photoshape run publish --pair {self.pair_id}"
+
+    @property
     def score(self) -> float | None:
         """Mean rank-1 confidence over the parts seen in the exemplar (all parts when none was)."""
         seen = [p.score for p in self.parts if p.score is not None and not p.unobserved]
@@ -125,21 +139,23 @@ class _Assets:
 
 
 def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
-    """Copy a single-file download, or zip the folder of a multi-file format; returns the site path."""
+    """Copy a single-file download, or zip what a multi-file format needs (`bundle.format_files`);
+    returns the site path."""
+    from photoshape_flow.export.bundle import format_files
+
     source = Path(source)
     folder = root / "downloads" / slug
     folder.mkdir(parents=True, exist_ok=True)
     if (fmt == SIDECAR or EXPORTERS[fmt].single_file) and source.is_file():
         shutil.copyfile(source, folder / source.name)
         return f"downloads/{slug}/{source.name}"
-    base = source if source.is_dir() else source.parent
-    if not base.is_dir():
+    files = format_files(source, fmt)
+    if not files:
         return None
     archive = folder / f"{fmt}.zip"
     with zipfile.ZipFile(archive, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for path in sorted(base.rglob("*")):
-            if path.is_file():
-                zf.write(path, f"{fmt}/{path.relative_to(base).as_posix()}")
+        for path, name in files:
+            zf.write(path, name)
     return f"downloads/{slug}/{archive.name}"
 
 
@@ -150,7 +166,12 @@ def write_gallery(
     *,
     title: str = "PhotoShapes",
 ) -> Path:
-    """Write the site into `out_dir` (created; existing files are overwritten); returns index.html."""
+    """Write the site into `out_dir` (created; existing files are overwritten); returns index.html.
+
+    The index lists the published PhotoShapes, so the gallery opens on renders rather than on rows
+    of blanks (only each shape's best pairs are published); every other candidate is on
+    candidates.html with the command that publishes it.
+    """
     root = Path(out_dir)
     (root / "pairs").mkdir(parents=True, exist_ok=True)
     assets = _Assets(root)
@@ -167,10 +188,16 @@ def write_gallery(
             "exemplar": assets.image(entry.exemplar_image),
             "grade_rank": GRADE_ORDER.get(entry.grade or "", 99),
         })
-    page = render("gallery_index.html", title=title, root="", rows=rows, grades=list(GRADE_ORDER))
-    (root / "index.html").write_text(page, encoding="utf-8")
+    published = [row for row in rows if row["entry"].published]
+    waiting = [row for row in rows if not row["entry"].published]
+    pages = {INDEX_PAGE: ("gallery_index.html", title, published),
+             CANDIDATES_PAGE: ("gallery_candidates.html", f"{title}: candidates without a render", waiting)}
+    for name, (template, page_title, page_rows) in pages.items():
+        page = render(template, title=page_title, root="", rows=page_rows, grades=list(GRADE_ORDER),
+                      published=len(published), waiting=len(waiting))
+        (root / name).write_text(page, encoding="utf-8")
     _write_materials_page(root, materials, usage, assets)
-    return root / "index.html"
+    return root / INDEX_PAGE
 
 
 def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets) -> None:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from photoshape_flow.export.geometry import export_parts, gltf_texcoords, tangents
-from photoshape_flow.export.pbr import EncodedImage, PbrMaterial, ResolveRef, pbr_materials
+from photoshape_flow.export.pbr import EncodedImage, PbrMaterial, ResolveRef, content_file_name, pbr_materials
 from photoshape_flow.export.text import one_line, one_line_strings, safe_name
 
 FLOAT, UINT32 = 5126, 5125
@@ -35,7 +35,7 @@ GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 class _Builder:
     """Accumulates the binary buffer and the JSON arrays of a glTF document."""
 
-    def __init__(self, embed_images: bool, texture_dir: str | None):
+    def __init__(self, embed_images: bool, texture_dir: str | None, content_names: bool = False):
         self.gltf: dict[str, Any] = {
             "asset": {"version": "2.0", "generator": "photoshape_flow"},
             "buffers": [], "bufferViews": [], "accessors": [], "meshes": [], "nodes": [],
@@ -44,6 +44,7 @@ class _Builder:
         self.blob = bytearray()
         self.embed_images = embed_images
         self.texture_dir = texture_dir
+        self.content_names = content_names
         self.image_files: dict[str, bytes] = {}  # relative path -> bytes (non-embedded images)
         self._images: dict[str, int] = {}
         self._materials: dict[int, int] = {}
@@ -82,7 +83,8 @@ class _Builder:
                 entry["mimeType"] = image.mime
             else:
                 folder = f"{self.texture_dir}/" if self.texture_dir else ""
-                rel = f"{folder}{stem}.{image.ext}"
+                file_name = content_file_name(image.data, image.ext) if self.content_names else f"{stem}.{image.ext}"
+                rel = f"{folder}{file_name}"
                 if rel in self.image_files:  # same name, other pixels (e.g. two built-ins)
                     rel = f"{folder}{stem}_{key[:8]}.{image.ext}"
                 self.image_files[rel] = image.data
@@ -142,13 +144,17 @@ def build_gltf(
     texture_dir: str | None = None,
     max_texture_size: int | None = None,
     name: str = "photoshape",
+    content_names: bool = False,
 ) -> tuple[dict[str, Any], bytes, dict[str, bytes]]:
-    """The glTF JSON, its binary buffer and the external image files (empty when embedded)."""
+    """The glTF JSON, its binary buffer and the external image files (empty when embedded).
+
+    `content_names`: external images are named by their bytes (`pbr.content_file_name`), for a
+    texture folder shared with other formats."""
     parts = export_parts(shape, materials, uv_transforms)
     pbr = pbr_materials(shape, list(materials) if materials is not None else None,
                         resolve_ref=resolve_ref, max_texture_size=max_texture_size)
     by_index = {p.index: m for p, m in zip(shape.parts, pbr, strict=True)}
-    b = _Builder(embed_images=embed_images, texture_dir=texture_dir)
+    b = _Builder(embed_images=embed_images, texture_dir=texture_dir, content_names=content_names)
     children: list[int] = []
     for part in parts:
         material = by_index[part.index]

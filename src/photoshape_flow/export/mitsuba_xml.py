@@ -8,15 +8,21 @@ had ``mi.xml.dict_to_xml``) cannot serialise in-memory objects (mitsuba-renderer
 - each part's ``mi.Mesh`` (its UVs already carry the texture-scale formula, the jitter and
   Mitsuba's v flip) is written with ``Mesh.write_ply`` and replaced by a ``ply`` shape with the
   part's BSDF dict (`render.scene.material_bsdf`);
-- each ``mi.Bitmap`` (float32, resampled as rendered) is written as OpenEXR and referenced by
+- each ``mi.Bitmap`` (float32, resampled as rendered) is written as OpenEXR named by its texels
+  (so a material used by several parts, and equal constant maps, are one file) and referenced by
   filename; sRGB-flagged ones are linearised first (EXR has no gamma flag; Mitsuba would otherwise
   read the encoded values as linear), so reloading gives the texels that were rendered;
-- ``transform_relocate`` then copies every referenced file (PLYs, EXRs, the envmap) into
-  ``meshes/`` and ``textures/`` beside the XML, so the folder is self-contained and relocatable.
+- ``transform_relocate`` then copies every referenced file (PLYs, EXRs) into ``meshes/`` and
+  ``textures/`` beside the XML, so the folder is self-contained and relocatable.
 
-The film size and sample count are XML defaults (``$resx``/``$spp`` style parameters written by
-Mitsuba), so ``mitsuba scene.xml`` renders the exported view; pass ``seed=`` to ``mi.render`` for
-the same noise.
+The scene is the one `Renderer.beauty` renders, not only the one `build_scene` describes: the
+envmap is written as the renderer's persistent scene lights with it (resampled to
+`render.pool.ENVMAP_RESOLUTION`; without an envmap, the pool's constant-radiance envmap rather than
+a ``constant`` emitter, which draws other noise), and the sampler carries the render's `seed` as its
+base seed. So the XML reloaded and rendered with Mitsuba's defaults (``mitsuba scene.xml``, or
+``mi.render(mi.load_file(...))`` at seed 0) gives the image that it accompanies, noise included, when
+`camera`, `size`, `spp` and `seed` are those of that render. The film size and sample count are XML
+defaults (``$resx``/``$spp`` style parameters written by Mitsuba).
 """
 
 from __future__ import annotations
@@ -26,8 +32,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.export.pbr import ResolveRef
-from photoshape_flow.export.text import safe_name
+from photoshape_flow.export.pbr import ResolveRef, content_file_name
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, material_from_builtin
 
@@ -47,37 +52,59 @@ def concrete_materials(shape: Any, materials: Sequence[Any] | None, resolve_ref:
     return out
 
 
-def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str], name: str = "texture") -> Any:
-    """Copy of a scene-dict value with Bitmaps written to EXR files named after where they sit
-    (``<material>_base_color.exr``), each Bitmap object once."""
+def _write_exr(bitmap: Any, mi: Any, stage: Path) -> str:
+    """Write a Bitmap as OpenEXR named by its texels (`pbr.content_file_name`): identical textures
+    (a material on several parts, constant and flat maps) become one file; returns the path."""
+    import numpy as np
+
+    if bitmap.srgb_gamma():  # EXR is linear by definition: linearise, or the flag is lost
+        bitmap = bitmap.convert(bitmap.pixel_format(), mi.Struct.Type.Float32, False)
+    texels = np.asarray(bitmap)
+    target = stage / content_file_name(repr(texels.shape).encode() + texels.tobytes(), "exr")
+    if not target.exists():
+        bitmap.write(str(target))
+    return str(target)
+
+
+def _serialisable(value: Any, mi: Any, stage: Path, written: dict[int, str]) -> Any:
+    """Copy of a scene-dict value with Bitmaps written to content-named EXR files, each Bitmap object once."""
     if isinstance(value, dict):
         out: dict[str, Any] = {}
         for key, item in value.items():
             if key == "bitmap" and isinstance(item, mi.Bitmap):
                 if id(item) not in written:
-                    target = stage / f"{safe_name(name, 'texture')}.exr"
-                    if target.exists():
-                        target = stage / f"{safe_name(name, 'texture')}_{len(written)}.exr"
-                    if item.srgb_gamma():  # EXR is linear by definition: linearise, or the flag is lost
-                        item = item.convert(item.pixel_format(), mi.Struct.Type.Float32, False)
-                    item.write(str(target))
-                    written[id(value["bitmap"])] = str(target)
-                out["filename"] = written[id(value["bitmap"])]
+                    written[id(item)] = _write_exr(item, mi, stage)
+                out["filename"] = written[id(item)]
             else:
-                child = name if key in ("bsdf", "nested_bsdf") else f"{name}_{key}"
-                out[key] = _serialisable(item, mi, stage, written, child)
+                out[key] = _serialisable(item, mi, stage, written)
         return out
     if isinstance(value, mi.Object):
         raise TypeError(f"cannot write a {type(value).__name__} object to Mitsuba XML")
     return value
 
 
-def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: str | Path,
-                 names: dict[str, str] | None = None) -> Path:
+def rendered_envmap(envmap: EnvmapSpec | None) -> dict[str, Any]:
+    """The envmap emitter as `Renderer.beauty` lights with it (`render.pool`): resampled data, same
+    scale and rotation; radiance 1 everywhere when `envmap` is None."""
+    import math
+
+    from photoshape_flow.render.pool import envmap_data
+    from photoshape_flow.render.runtime import ensure_mitsuba
+
+    mi = ensure_mitsuba()
+    data = envmap_data(envmap)[:, 1:-1]  # without the plugin's wrap-around columns: it adds them again
+    return {
+        "type": "envmap",
+        "bitmap": mi.Bitmap(data.copy()),
+        "scale": float(envmap.scale) if envmap is not None else 1.0,
+        "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], math.degrees(envmap.rotation if envmap else 0.0)),
+    }
+
+
+def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: str | Path) -> Path:
     """Write a `build_scene` dict as XML + PLY meshes + EXR textures.
 
-    `bsdfs`: part key -> the part's BSDF dict (the meshes in `scene` hold instantiated BSDFs);
-    `names`: part key -> material name, used to name the texture files.
+    `bsdfs`: part key -> the part's BSDF dict (the meshes in `scene` hold instantiated BSDFs).
     """
     from photoshape_flow.render.runtime import ensure_mitsuba
 
@@ -94,10 +121,10 @@ def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: 
                 value.write_ply(str(ply))
                 entry: dict[str, Any] = {"type": "ply", "filename": str(ply)}
                 if key in bsdfs:
-                    entry["bsdf"] = _serialisable(bsdfs[key], mi, stage, written, (names or {}).get(key, key))
+                    entry["bsdf"] = _serialisable(bsdfs[key], mi, stage, written)
                 plain[key] = entry
             else:
-                plain[key] = _serialisable(value, mi, stage, written, key)
+                plain[key] = _serialisable(value, mi, stage, written)
         config = mi.parser.ParserConfig(mi.variant())
         state = mi.parser.parse_dict(config, plain)
         mi.parser.transform_relocate(config, state, str(out.parent))
@@ -118,11 +145,12 @@ def write_mitsuba_xml(
     floor: bool = False,
     resolve_ref: ResolveRef | None = None,
     max_texture_size: int | None = None,
+    seed: int = 0,
 ) -> Path:
     """Export the beauty scene of `shape` (built-ins resolved with `resolve_ref`) as Mitsuba XML.
 
     `max_texture_size` defaults to the renderer's (`SceneOptions`), so the XML holds the texels
-    that the PhotoShape renders used.
+    that the PhotoShape renders used; `seed` is the sampler's base seed (see the module docstring).
     """
     from photoshape_flow.render.scene import SceneOptions, build_scene, material_bsdf, part_key
 
@@ -133,10 +161,11 @@ def write_mitsuba_xml(
         uv_transforms=tuple(uv_transforms) if uv_transforms is not None else None,
     )
     scene = build_scene(shape, specs, envmap, camera, options)
+    scene["sensor"]["sampler"]["seed"] = int(seed)
+    scene["emitter"] = rendered_envmap(envmap)
     bsdfs = {
         part_key(part.index): material_bsdf(spec, max_texture_size)
         for part, spec in zip(shape.parts, specs, strict=True)
         if len(part.faces)
     }
-    names = {part_key(part.index): spec.name for part, spec in zip(shape.parts, specs, strict=True)}
-    return scene_to_xml(scene, bsdfs, path, names)
+    return scene_to_xml(scene, bsdfs, path)

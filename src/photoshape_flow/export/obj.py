@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from photoshape_flow.export.geometry import export_parts
-from photoshape_flow.export.pbr import PbrMaterial, ResolveRef, pbr_materials
+from photoshape_flow.export.pbr import PbrMaterial, ResolveRef, content_file_name, pbr_materials
 from photoshape_flow.export.text import one_line, safe_name
 
 
@@ -44,10 +44,13 @@ def write_obj(
     texture_dir: str = "textures",
     max_texture_size: int | None = None,
     header: Sequence[str] = (),
+    content_names: bool = False,
 ) -> list[Path]:
     """Write `<stem>.obj`, `<stem>.mtl` and the textures; returns every file written.
 
     `header` lines (licences, attribution) go into both files as comments, each kept on its line.
+    `content_names`: textures are named by their bytes (`pbr.content_file_name`), for a texture
+    folder shared with other formats (`texture_dir` may then be ``../textures``).
     """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -67,7 +70,7 @@ def write_obj(
         while name in names.values():
             name = f"{name}_{len(names)}"
         names[id(mat)] = name
-        mtl_lines += ["", *_mtl_entry(mat, name, texture_dir, files)]
+        mtl_lines += ["", *_mtl_entry(mat, name, texture_dir, files, content_names)]
 
     mtl_path = out.with_suffix(".mtl")
     obj_lines = [_comment(line) for line in ("photoshape_flow OBJ export", *header)]
@@ -95,9 +98,13 @@ def write_obj(
     return written
 
 
-def _mtl_entry(mat: PbrMaterial, name: str, texture_dir: str, files: dict[str, bytes]) -> list[str]:
+def _mtl_entry(mat: PbrMaterial, name: str, texture_dir: str, files: dict[str, bytes],
+               content_names: bool = False) -> list[str]:
     def put(kind: str, data: bytes, ext: str) -> str:
-        rel = f"{texture_dir}/{name}_{safe_name(kind, 'map')}.{safe_name(ext, 'png')}"  # one token, no ../
+        ext = safe_name(ext, "png")
+        # one token; ../ only where the caller asked for a shared folder
+        file_name = content_file_name(data, ext) if content_names else f"{name}_{safe_name(kind, 'map')}.{ext}"
+        rel = f"{texture_dir}/{file_name}"
         files[rel] = data
         return rel
 

@@ -32,6 +32,12 @@ DEFAULT_ROUGHNESS = 0.5
 DEFAULT_METALLIC = 0.0
 
 
+def content_file_name(data: bytes, ext: str) -> str:
+    """A file name given by the bytes (``<sha256 prefix>.<ext>``): writers that share one texture
+    folder (`export.bundle`) write identical textures once, whichever format or material wrote them."""
+    return f"{hashlib.sha256(data).hexdigest()[:16]}.{ext}"
+
+
 @dataclass(frozen=True)
 class EncodedImage:
     """An image file's bytes, ready to embed or write (PNG or JPEG, 8-bit)."""

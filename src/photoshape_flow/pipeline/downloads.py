@@ -18,11 +18,21 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
-from photoshape_flow.pipeline.photoshapes import DEFAULT_METHOD, candidate_method_keys, choose_envmap, load_photoshape
+from photoshape_flow.pipeline.photoshapes import (
+    DEFAULT_METHOD,
+    EXEMPLAR_VIEW,
+    candidate_method_keys,
+    choose_envmap,
+    exemplar_render,
+    load_photoshape,
+    render_key,
+)
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
 log = logging.getLogger(__name__)
+
+DEFAULT_FILM = (512, 128)  # (size, spp) of a scene export without a published render to match
 
 
 def safe_key(method_key: str) -> str:
@@ -46,6 +56,20 @@ def export_manifest(pair_id: int, method_key: str, settings: Settings | None = N
         return None
 
 
+def published_film(session: Any, pair_id: int, method_key: str) -> tuple[int, int]:
+    """(size, spp) of the PhotoShape's published exemplar-view render, else `DEFAULT_FILM`."""
+    import sqlalchemy as sa
+
+    params = session.execute(
+        sa.select(m.Rendering.params).where(m.Rendering.kind == "photoshape", m.Rendering.status == STATUS_OK,
+                                            m.Rendering.key == render_key(pair_id, method_key, EXEMPLAR_VIEW))
+    ).scalar_one_or_none() or {}
+    try:
+        return int(params["size"]), int(params["spp"])
+    except (KeyError, TypeError, ValueError):
+        return DEFAULT_FILM
+
+
 def export_candidates(
     out_dir: str | Path,
     pair_ids: Sequence[int] | None = None,
@@ -53,13 +77,14 @@ def export_candidates(
     formats: Sequence[str] = DEFAULT_FORMATS,
     settings: Settings | None = None,
     *,
-    size: int = 512,
-    spp: int = 128,
+    size: int | None = None,
+    spp: int | None = None,
 ) -> list[dict[str, Any]]:
     """Write each candidate's downloads into ``out_dir/<pair_id>-<method_key>/``; one result per item.
 
     Each result: ``{"pair_id", "method_key", "status", "error", "files": {format: path}}``; a failing
-    candidate is reported and the others go on.
+    candidate is reported and the others go on. `size` / `spp` of the scene formats: None takes the
+    published exemplar-view render's, so the XML reproduces it (`DEFAULT_FILM` when unpublished).
     """
     from photoshape_flow.export.bundle import export_photoshape
 
@@ -83,9 +108,12 @@ def export_candidates(
                 env = session.get(m.Envmap, envmap_id) if envmap_id is not None else None
                 item = load_photoshape(session, store, pair_id, method_key, env)
             target = Path(out_dir) / f"{pair_id}-{safe_key(method_key)}"
+            camera, seed = exemplar_render(item, settings.seed)  # the framing and noise of the gallery's render
+            with session_scope(url) as session:
+                film = published_film(session, pair_id, method_key)
             written = export_photoshape(target, item.mesh, item.materials, item.uv_transforms, item.document,
-                                        formats=formats, envmap=item.envmap, camera=item.camera,
-                                        resolve_ref=store.resolve, size=size, spp=spp)
+                                        formats=formats, envmap=item.envmap, camera=camera, seed=seed,
+                                        resolve_ref=store.resolve, size=size or film[0], spp=spp or film[1])
             result.update(status=STATUS_OK, error=None, files={k: str(v) for k, v in written.items()})
         except Exception as exc:
             result.update(status=STATUS_FAILED, error=f"pair {pair_id} ({method_key}): {type(exc).__name__}: {exc}")

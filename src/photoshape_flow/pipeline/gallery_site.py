@@ -8,7 +8,7 @@ grade, downloads (from the export manifests) and licences.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
@@ -17,6 +17,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
+from photoshape_flow.pipeline.grading import current_grades
 from photoshape_flow.pipeline.photoshapes import candidate_method_keys, provenance
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
@@ -37,7 +38,9 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
 
     entries: list[GalleryEntry] = []
     used: set[int] = set()
-    for pair_id, method_key in candidate_method_keys(session, method):
+    candidates = candidate_method_keys(session, method)
+    grades = current_grades(session, candidates)  # grades of what each PhotoShape shows now
+    for pair_id, method_key in candidates:
         pair = session.get(m.Pair, pair_id)
         shape, exemplar = session.get(m.Shape, pair.shape_id), session.get(m.Exemplar, pair.exemplar_id)
         rows = session.execute(
@@ -70,9 +73,7 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
         iou = session.execute(
             sa.select(m.Alignment.iou_crf).where(m.Alignment.pair_id == pair_id, m.Alignment.method == "flow-crf")
         ).scalar_one_or_none()
-        grade = session.execute(
-            sa.select(m.Grade).where(m.Grade.pair_id == pair_id).order_by(m.Grade.updated_at.desc(), m.Grade.id.desc())
-        ).scalars().first()
+        grade = grades.get((pair_id, method_key))
         manifest = export_manifest(pair_id, method_key, settings) or {}
         folder = export_dir(pair_id, method_key, settings)
         downloads = {fmt: folder / rel for fmt, rel in (manifest.get("files") or {}).items()
@@ -101,15 +102,26 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
     return entries, materials
 
 
-def write_gallery_site(out_dir: str | Path, method: str | None = None, settings: Settings | None = None) -> Path:
-    """Gather the candidates from the database and write the static gallery; returns index.html."""
+class GallerySite(NamedTuple):
+    """A written gallery: its index.html and how many candidates are published (listed there) or not."""
+
+    index: Path
+    published: int
+    waiting: int
+
+
+def write_gallery_site(out_dir: str | Path, method: str | None = None,
+                       settings: Settings | None = None) -> GallerySite:
+    """Gather the candidates from the database and write the static gallery."""
     from photoshape_flow.export.gallery import write_gallery
 
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
     with session_scope(settings.resolved_database_url) as session:
         entries, materials = gallery_data(session, store, method, settings)
-    return write_gallery(out_dir, entries, materials)
+    index = write_gallery(out_dir, entries, materials)
+    published = sum(entry.published for entry in entries)
+    return GallerySite(index, published, len(entries) - published)
 
 
 def write_contact_sheet(out: str | Path, method: str | None = None, settings: Settings | None = None,

@@ -15,6 +15,7 @@ inference stage recorded one, otherwise none (the texture-scale formula alone).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -32,6 +33,18 @@ CODE_VERSION = "publish-v1"  # part of every PhotoShape's fingerprint: bump it t
 DEFAULT_METHOD = "classifier"
 # elevation (rad), distance, horizontal fov (deg): the unit cube's bounding sphere (r = 0.87) fits the frame
 TURNTABLE_CAMERA = (math.radians(20.0), 2.6, 40.0)
+FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
+EXEMPLAR_VIEW = "exemplar"
+
+
+def render_seed(global_seed: int, kind: str, key: str) -> int:
+    """A render seed (31 bits, what Mitsuba takes) from the global seed and the render's kind and key."""
+    return int.from_bytes(hashlib.sha256(f"{global_seed}/{kind}/{key}".encode()).digest()[:4], "little") >> 1
+
+
+def render_key(pair_id: int, method_key: str, view: str) -> str:
+    """The `Rendering.key` of one PhotoShape view (kind ``photoshape``)."""
+    return f"{pair_id}/{method_key}/{view}"
 
 
 def candidate_method_keys(session: Session, method: str | None, pair_ids: Sequence[int] | None = None
@@ -215,6 +228,23 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
     )
 
 
+def framed_views(mesh: Any, camera: Any, views: int) -> list[tuple[str, Any]]:
+    """`views_of`, each view framed like a product photo: the fov narrowed until the shape fills it.
+
+    Publish renders these cameras and the exports write the exemplar one, so a downloaded scene
+    shows what the gallery shows.
+    """
+    from photoshape_flow.align.partmap import zoom_to_fit
+
+    return [(view, zoom_to_fit(mesh, cam, margin=FRAME_MARGIN)) for view, cam in views_of(camera, views)]
+
+
+def exemplar_render(item: PhotoShape, global_seed: int) -> tuple[Any, int]:
+    """(camera, seed) of a PhotoShape's exemplar-view render: what its exports must reproduce."""
+    camera = framed_views(item.mesh, item.camera, 0)[0][1]
+    return camera, render_seed(global_seed, "photoshape", render_key(item.pair_id, item.method_key, EXEMPLAR_VIEW))
+
+
 def views_of(camera: Any, views: int) -> list[tuple[str, Any]]:
     """The exemplar's view, then a canonical turntable of `views` azimuths starting at the front (+z).
 
@@ -228,4 +258,4 @@ def views_of(camera: Any, views: int) -> list[tuple[str, Any]]:
                                               distance=distance, fov=fov))
         for i in range(max(0, views))
     ]
-    return [("exemplar", camera), *turntable]
+    return [(EXEMPLAR_VIEW, camera), *turntable]

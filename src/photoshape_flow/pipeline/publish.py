@@ -10,7 +10,8 @@ which envmap lights it) this stage:
    ``turntable-00`` ...), images ``srgb`` and ``alpha``;
 2. renders the shape with its built-in materials at the exemplar's view (``kind="builtin"``,
    ``key=f"{pair_id}/exemplar"``), the baseline the gallery shows beside it;
-3. exports the downloads (the chosen `export.formats`, the Mitsuba XML at the exemplar view, and
+3. exports the downloads (the chosen `export.formats`, the Mitsuba XML with the exemplar-view render's
+   framed camera, film, spp and seed, so it renders that image again (`photoshapes.exemplar_render`), and
    `assignment.json`; see `export.bundle`) into ``<data_root>/exports/<method_key>/<pair_id>/``
    (`pipeline.downloads`). Exports live in a folder, not the blob store, because the multi-file
    formats (XML + PLY + EXR, OBJ + MTL + PNG) only work with their relative paths intact and users
@@ -28,7 +29,6 @@ The gallery built from these rows is `pipeline.gallery_site`; grades are `pipeli
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 import json
 import logging
 import time
@@ -39,7 +39,6 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.align.partmap import zoom_to_fit
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -52,21 +51,20 @@ from photoshape_flow.pipeline.photoshapes import (
     assignment_set_keys,
     candidate_method_keys,
     choose_envmap,
+    exemplar_render,
+    framed_views,
     load_photoshape,
-    views_of,
+    render_key,
+    render_seed,
 )
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
 log = logging.getLogger(__name__)
 
-FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
-
-
-def item_seed(global_seed: int, kind: str, key: str) -> int:
-    """A render seed derived from the global seed and the item's natural key."""
-    return int.from_bytes(hashlib.sha256(f"{global_seed}/{kind}/{key}".encode()).digest()[:4], "little") >> 1
-
+# part of every export's params_hash: bump it when the bundle's layout or a writer changes
+# (v2: the Mitsuba XML carries the render's framed camera, seed and envmap; textures shared by content)
+EXPORT_VERSION = 2
 
 @dataclass
 class PublishSummary:
@@ -140,21 +138,19 @@ def run_publish(
             message = f"pair {pair_id} ({method_key}): {type(exc).__name__}: {exc}"
             fail(message)
             with session_scope(url) as session:  # recorded on the exemplar view's row
-                record_rendering(session, store, kind="photoshape", key=f"{pair_id}/{method_key}/exemplar",
+                record_rendering(session, store, kind="photoshape", key=render_key(pair_id, method_key, "exemplar"),
                                  images={}, params={"method_key": method_key}, pair_id=pair_id,
                                  status=STATUS_FAILED, error=message[:2000])
             continue
-        # Every view is framed like a product photo: the field of view narrowed until the shape fills it.
-        framed = [(view, zoom_to_fit(item.mesh, camera, margin=FRAME_MARGIN)) for view, camera in
-                  views_of(item.camera, views)]
-        jobs = [("photoshape", f"{pair_id}/{method_key}/{view}", camera, item.materials, item.uv_transforms)
+        framed = framed_views(item.mesh, item.camera, views)
+        jobs = [("photoshape", render_key(pair_id, method_key, view), camera, item.materials, item.uv_transforms)
                 for view, camera in framed]
         jobs.append(("builtin", f"{pair_id}/exemplar", framed[0][1], [None] * len(item.mesh.parts), None))
         with session_scope(url) as session:
             existing = {kind: _existing(session, kind, [k for kd, k, *_ in jobs if kd == kind])
                         for kind in ("photoshape", "builtin")}
         for kind, key, camera, materials, jitters in jobs:
-            seed = item_seed(settings.seed, kind, key)
+            seed = render_seed(settings.seed, kind, key)
             fingerprint = dict(item.fingerprint)
             if kind == "builtin":
                 fingerprint["parts"] = [{"part": p.index, "builtin": p.builtin_material} for p in item.mesh.parts]
@@ -204,8 +200,10 @@ def run_publish(
 def _export(item: PhotoShape, formats: Sequence[str], settings: Settings, store: BlobStore, size: int, spp: int,
             summary: PublishSummary, fail: Any, export_photoshape: Any) -> None:
     out = export_dir(item.pair_id, item.method_key, settings)
+    camera, seed = exemplar_render(item, settings.seed)  # the scene formats reproduce the exemplar-view render
     params_hash = stable_hash({**item.fingerprint, "document": item.document, "formats": list(formats),
-                         "camera": item.camera.to_dict(), "size": size, "spp": spp})
+                               "camera": camera.to_dict(), "size": size, "spp": spp, "seed": seed,
+                               "export": EXPORT_VERSION})
     manifest = export_manifest(item.pair_id, item.method_key, settings)
     if manifest and manifest.get("status") == STATUS_OK and manifest.get("params_hash") == params_hash \
             and out.is_dir():
@@ -215,7 +213,7 @@ def _export(item: PhotoShape, formats: Sequence[str], settings: Settings, store:
                               "formats": list(formats), "updated_at": dt.datetime.now(dt.UTC).isoformat()}
     try:
         written = export_photoshape(out, item.mesh, item.materials, item.uv_transforms, item.document,
-                                    formats=formats, envmap=item.envmap, camera=item.camera,
+                                    formats=formats, envmap=item.envmap, camera=camera, seed=seed,
                                     resolve_ref=store.resolve, size=size, spp=spp)
         record.update(status=STATUS_OK, error=None,
                       files={k: v.relative_to(out).as_posix() for k, v in written.items()})

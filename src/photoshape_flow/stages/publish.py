@@ -46,5 +46,6 @@ def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far."""
     from photoshape_flow.pipeline.gallery_site import write_gallery_site
 
-    index = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
-    return StageReport(NAME, details={"gallery": str(index)})
+    site = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
+    return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
+                                      "gallery_waiting": site.waiting})
