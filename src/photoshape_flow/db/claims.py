@@ -166,6 +166,13 @@ def holds(session: Session, stage: str | None = None, item_keys: Sequence[str] |
     return out
 
 
+def live_holds(session: Session, stage: str, item_keys: Sequence[str]) -> list[Hold]:
+    """Holds on `item_keys` of exactly `stage` that nobody may take: unexpired, holder alive (or elsewhere)."""
+    if not item_keys:
+        return []
+    return [h for h in holds(session, stage, item_keys) if h.stage == stage and not h.stale]
+
+
 def release_held(session: Session, stage: str | None = None, *, stale_only: bool = True) -> int:
     """Delete held claims (of `stage`, or all): only stale ones (expired or dead holder) unless told."""
     table = WorkClaim.__table__

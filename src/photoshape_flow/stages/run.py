@@ -25,7 +25,7 @@ from photoshape_flow.pipeline.progress import StageProgress
 from photoshape_flow.profiles import Profile, ResolvedProfile, resolve_profile
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.registry import REGISTRY, Stage, get_stage
-from photoshape_flow.stages.report import Blocked, StageReport
+from photoshape_flow.stages.report import Blocked, StageReport, blocked_by
 from photoshape_flow.stages.work import WorkUnit, claim_hash, item_hash
 
 log = logging.getLogger(__name__)
@@ -99,7 +99,7 @@ def _exclusively(stage: Stage, cfg: Any, ctx: StageContext, work: Any) -> StageR
     lease = ctx.settings.claim_lease_seconds
     with ctx.session() as session:
         won = claims.claim(session, stage.name, [STAGE_ITEM], lease_seconds=lease, retry_failed=True)
-        blocked = Blocked() if won else _blocked(session, stage.name, [STAGE_ITEM])
+        blocked = Blocked() if won else blocked_by(claims.live_holds(session, stage.name, [STAGE_ITEM]))
     if not won:
         return StageReport(stage.name, blocked=blocked)
     try:
@@ -108,15 +108,6 @@ def _exclusively(stage: Stage, cfg: Any, ctx: StageContext, work: Any) -> StageR
     finally:
         with ctx.session() as session:
             claims.release(session, stage.name, won)
-
-
-def _blocked(session: Session, claim_stage: str, keys: Sequence[str]) -> Blocked:
-    """The live claims on `keys` (the ones this run did not win and that are not done)."""
-    live = [h for h in claims.holds(session, claim_stage, keys) if not h.stale and h.stage == claim_stage]
-    if not live:
-        return Blocked()
-    return Blocked(sum(h.count for h in live), tuple(dict.fromkeys(h.describe() for h in live)),
-                   max((h.until for h in live if h.until is not None), default=None))
 
 
 def run_all(profile: str | Profile | ResolvedProfile, ctx: StageContext, names: Sequence[str] | None = None,
@@ -226,8 +217,7 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
     with ctx.session() as session:
         won = claims.claim(session, claim_stage, list(hashes), params_hash=hashes, lease_seconds=lease,
                            retry_failed=True)
-        lost = [k for k in hashes if k not in set(won)]
-        blocked = _blocked(session, claim_stage, lost) if lost else Blocked()
+        blocked = blocked_by(claims.live_holds(session, claim_stage, [k for k in hashes if k not in set(won)]))
     mine = tuple(int(k) for k in won)
     if not mine:
         return StageReport(name, skipped=len(unit.ids) - blocked.count, blocked=blocked)
