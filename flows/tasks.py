@@ -18,6 +18,9 @@ from prefect import get_run_logger, task
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.masking import install_password_masking
+
+install_password_masking()  # importing prefect configured its console and API log handlers: mask them too
 
 
 def task_runner() -> Any:
