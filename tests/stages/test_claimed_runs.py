@@ -128,3 +128,26 @@ def test_publish_claims_a_pair_again_when_a_new_classifier_assigns_it(db_url: st
                          for part in parts])
     again = process("publish", unit, "tiny", ctx)
     assert again.done == 1 and seen == [unit.ids, unit.ids]
+
+
+def test_a_finishing_step_runs_once_at_a_time(db_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two workers done with publish's batches: only one writes the gallery, the other is told who does."""
+    from photoshape_flow.stages import finish
+
+    calls: list[str] = []
+
+    def fake_finish(ctx: StageContext, cfg: object) -> StageReport:
+        calls.append("gallery")
+        return StageReport("publish")
+
+    monkeypatch.setitem(STAGES, "publish", dataclasses.replace(STAGES["publish"], finish=fake_finish))
+    ctx = StageContext.create()
+    with session_scope(db_url) as session:
+        claims.claim(session, "publish:finish", ["stage"], worker="other-worker", lease_seconds=900)
+    blocked = finish("publish", "tiny", ctx)
+    assert blocked is not None and blocked.blocked.count == 1 and calls == []
+    with session_scope(db_url) as session:
+        claims.release(session, "publish:finish", ["stage"], worker="other-worker")
+    assert finish("publish", "tiny", ctx).blocked.count == 0 and calls == ["gallery"]
+    with session_scope(db_url) as session:
+        assert claims.holds(session) == []  # released after the step

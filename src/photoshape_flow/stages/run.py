@@ -5,9 +5,10 @@ the resolved profile and every stage's report in `pipeline_run`. `plan_batches` 
 fan-out path: a unit's items are claimed in `work_claim` before the stage runs them. The flows map a
 task over the units; `run_stage` (what `photoshape run` calls) processes them one after another in
 its own process, so both share one up-to-date check. A stage that does not fan out takes one
-stage-level claim (item "stage") for the whole run, so a second concurrent run is blocked instead of
-duplicating it. Items another live worker holds are reported in `StageReport.blocked`; `run_all`
-stops there, or with `wait` polls until they are free and does them.
+stage-level claim (item "stage") for the whole run, and so does a fan-out stage's finishing step,
+so a second concurrent run is blocked instead of duplicating it. Items another live worker holds are
+reported in `StageReport.blocked`; `run_all` stops there, or with `wait` polls until they are free
+and does them.
 """
 
 from __future__ import annotations
@@ -75,7 +76,8 @@ def run_stage(name: str, profile: str | Profile | ResolvedProfile, ctx: StageCon
     elif stage.fans_out:
         report = _timed(lambda: _fan_out_here(stage, resolved, ctx))
     else:
-        report = _timed(lambda: _exclusively(stage, stage.config(resolved.profile), ctx, work))
+        cfg = stage.config(resolved.profile)
+        report = _timed(lambda: _exclusively(name, name, ctx, lambda: stage.run(ctx, cfg, work)))
     log.info("stage %s finished in %.1f s: %d done, %d skipped, %d failed, %d rejected, %d blocked", name,
              report.seconds, report.done, report.skipped, report.failed, report.rejected, report.blocked.count)
     return report
@@ -90,24 +92,24 @@ def _fan_out_here(stage: Stage, resolved: ResolvedProfile, ctx: StageContext) ->
     return report if finished is None else report.merge(finished)
 
 
-def _exclusively(stage: Stage, cfg: Any, ctx: StageContext, work: Any) -> StageReport:
-    """Run a whole stage under a stage-level claim, or report it blocked by the live worker holding it.
+def _exclusively(name: str, claim_stage: str, ctx: StageContext, call: Callable[[], StageReport]) -> StageReport:
+    """`call` under a stage-level claim, or stage `name`'s report blocked by the live worker holding it.
 
-    The claim is a lock, not an up-to-date check (the stage resumes and skips by itself): it is
-    released when the run ends, however it ends.
+    The claim is a lock, not an up-to-date check (whole stages and finishing steps resume and skip
+    by themselves): it is released when `call` ends, however it ends.
     """
     lease = ctx.settings.claim_lease_seconds
     with ctx.session() as session:
-        won = claims.claim(session, stage.name, [STAGE_ITEM], lease_seconds=lease, retry_failed=True)
-        blocked = Blocked() if won else blocked_by(claims.live_holds(session, stage.name, [STAGE_ITEM]))
+        won = claims.claim(session, claim_stage, [STAGE_ITEM], lease_seconds=lease, retry_failed=True)
+        blocked = Blocked() if won else blocked_by(claims.live_holds(session, claim_stage, [STAGE_ITEM]))
     if not won:
-        return StageReport(stage.name, blocked=blocked)
+        return StageReport(name, blocked=blocked)
     try:
         with Heartbeat(ctx.database_url, lease):
-            return stage.run(ctx, cfg, work)
+            return call()
     finally:
         with ctx.session() as session:
-            claims.release(session, stage.name, won)
+            claims.release(session, claim_stage, won)
 
 
 def run_all(profile: str | Profile | ResolvedProfile, ctx: StageContext, names: Sequence[str] | None = None,
@@ -237,12 +239,13 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
 
 
 def finish(name: str, profile: str | Profile | ResolvedProfile, ctx: StageContext) -> StageReport | None:
-    """The stage's step after all its units (pairs of coarse alignment, the gallery of publish)."""
+    """The stage's step after all its units (pairs of coarse alignment, the gallery of publish), under a
+    stage-level claim (`NAME:finish`) so two workers finishing at once do not both do it."""
     stage = get_stage(name)
     if stage.finish is None:
         return None
-    finish_step = stage.finish
-    return _timed(lambda: finish_step(ctx, stage.config(_resolved(profile).profile)))
+    finish_step, cfg = stage.finish, stage.config(_resolved(profile).profile)
+    return _timed(lambda: _exclusively(name, f"{name}:finish", ctx, lambda: finish_step(ctx, cfg)))
 
 
 def stage_progress(session: Session) -> list[StageProgress]:
