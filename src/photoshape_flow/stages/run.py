@@ -84,10 +84,13 @@ def run_stage(name: str, profile: str | Profile | ResolvedProfile, ctx: StageCon
 
 
 def _fan_out_here(stage: Stage, resolved: ResolvedProfile, ctx: StageContext) -> StageReport:
-    """Every planned unit claimed and processed one after another, then the finishing step."""
+    """Every planned unit claimed and processed one after another, then the finishing step, unless items
+    are blocked: the finishing step would see partial results (the holder's own run finishes after them)."""
     report = StageReport(stage.name)
     for unit in plan_batches(stage.name, resolved, ctx):
         report = report.merge(process(stage.name, unit, resolved, ctx))
+    if report.blocked.count:
+        return report
     finished = finish(stage.name, resolved, ctx)
     return report if finished is None else report.merge(finished)
 
