@@ -133,8 +133,9 @@ def run_all(profile: str | Profile | ResolvedProfile, ctx: StageContext, names: 
         for name in wanted:
             work = ingest if name == "ingest" else None
             report = run_stage(name, resolved, ctx, work)
+            if wait and report.blocked.count:  # said once; then polled quietly
+                log.warning("waiting: %s", blocked_line(report))
             while wait and report.blocked.count:
-                log.warning("%s", blocked_line(report))
                 time.sleep(WAIT_POLL_SECONDS)
                 report = _after_wait(report, run_stage(name, resolved, ctx, work))
             reports.append(report)
