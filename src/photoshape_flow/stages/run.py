@@ -44,12 +44,12 @@ class StageBlocked(Exception):
         self.reports = reports
 
 
-def blocked_line(report: StageReport) -> str:
+def blocked_line(report: StageReport, hint: str = "; not done by this run (use --wait to wait for them)") -> str:
     """One line for people: how many items, held by whom, until when."""
     b = report.blocked
     until = f" until {b.until.strftime('%Y-%m-%d %H:%M:%S UTC')}" if b.until is not None else ""
     return (f"{report.stage}: {b.count} item{'s' if b.count != 1 else ''} held by another live worker "
-            f"({', '.join(b.holders) or 'unknown'}){until}; not done by this run (use --wait to wait for them)")
+            f"({', '.join(b.holders) or 'unknown'}){until}{hint}")
 
 
 def _resolved(profile: str | Profile | ResolvedProfile) -> ResolvedProfile:
@@ -134,7 +134,7 @@ def run_all(profile: str | Profile | ResolvedProfile, ctx: StageContext, names: 
             work = ingest if name == "ingest" else None
             report = run_stage(name, resolved, ctx, work)
             if wait and report.blocked.count:  # said once; then polled quietly
-                log.warning("waiting: %s", blocked_line(report))
+                log.warning("waiting: %s", blocked_line(report, hint=""))
             while wait and report.blocked.count:
                 time.sleep(WAIT_POLL_SECONDS)
                 report = _after_wait(report, run_stage(name, resolved, ctx, work))
