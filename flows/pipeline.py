@@ -24,7 +24,7 @@ def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName
     from photoshape_flow.flows.events import stage_context
 
     from photoshape_flow.profiles import resolve_profile
-    from photoshape_flow.stages import StageReport
+    from photoshape_flow.stages import Blocked, StageReport
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
     wanted = [name for name in STAGE_NAMES if name in set(stages or STAGE_NAMES)]
@@ -36,7 +36,11 @@ def photoshape_pipeline(profile: ProfileName = "default", stages: list[StageName
         for name in wanted:
             results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides)
             counts = {k: int(results[name].get(k) or 0) for k in ("done", "skipped", "failed", "rejected")}
-            record_report(ctx, run_id, StageReport(name, seconds=times[name], **counts))
+            held = results[name].get("blocked") or 0  # a fan-out's total, or a whole stage's Blocked as JSON
+            blocked = Blocked(int(held["count"] if isinstance(held, dict) else held))
+            record_report(ctx, run_id, StageReport(name, seconds=times[name], blocked=blocked, **counts))
+            if blocked.count:
+                get_run_logger().warning("%s: %d items held by another live worker", name, blocked.count)
             get_run_logger().info("%s: %.1f s", name, times[name])
     except BaseException as exc:
         finish_run(ctx, run_id, f"{type(exc).__name__}: {exc}")
