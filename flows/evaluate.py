@@ -7,6 +7,10 @@ from typing import Any
 from prefect import flow, get_run_logger, task
 from prefect.artifacts import create_table_artifact
 
+from photoshape_flow.masking import install_password_masking
+
+install_password_masking()  # importing prefect configured its console and API log handlers: mask them too
+
 
 @task(name="run-evaluation")
 def run_evaluation_task(groundtruth: str, run: str | None, source: str | None) -> dict[str, Any]:

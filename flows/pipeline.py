@@ -26,7 +26,7 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
     from photoshape_flow.flows.events import stage_context
 
     from photoshape_flow.profiles import resolve_profile
-    from photoshape_flow.stages import StageReport
+    from photoshape_flow.stages import Blocked, StageReport
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
     ctx = stage_context()
@@ -37,7 +37,11 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
         for name in names:
             results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides)
             counts = {k: int(results[name].get(k) or 0) for k in ("done", "skipped", "failed", "rejected")}
-            record_report(ctx, run_id, StageReport(name, seconds=times[name], **counts))
+            held = results[name].get("blocked") or 0  # a fan-out's total, or a whole stage's Blocked as JSON
+            blocked = Blocked(int(held["count"] if isinstance(held, dict) else held))
+            record_report(ctx, run_id, StageReport(name, seconds=times[name], blocked=blocked, **counts))
+            if blocked.count:
+                get_run_logger().warning("%s: %d items held by another live worker", name, blocked.count)
             get_run_logger().info("%s: %d done, %d skipped, %d failed in %.1f s", name, counts["done"],
                                   counts["skipped"], counts["failed"], times[name])
     except BaseException as exc:

@@ -39,7 +39,8 @@ def effective(profile: str | None, overrides: list[str] | None) -> tuple[str, li
 def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> dict[str, Any]:
     """Map `process_batch` over the stage's units, tracking progress in an artifact, then finish."""
     units = plan_batches(stage, profile, overrides, batch_size)
-    totals: dict[str, Any] = {"batches": len(units), "items": 0, "done": 0, "skipped": 0, "failed": 0, "rejected": 0}
+    totals: dict[str, Any] = {"batches": len(units), "items": 0, "done": 0, "skipped": 0, "failed": 0, "rejected": 0,
+                              "blocked": 0}
     if units:
         progress = Progress(stage, len(units))
         futures = [process_batch.submit(stage, u["part"], u["ids"], profile, overrides, len(u["ids"]))
@@ -48,6 +49,7 @@ def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: i
             report = future.result()
             for key in ("done", "skipped", "failed", "rejected"):
                 totals[key] += report[key]
+            totals["blocked"] += report["blocked"]["count"]  # held by another live worker (see its holders)
             progress.step()
         totals["items"] = sum(len(u["ids"]) for u in units)
     finished = finish_stage(stage, profile, overrides)

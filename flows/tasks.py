@@ -19,6 +19,9 @@ from prefect import get_run_logger, task
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.masking import install_password_masking
+
+install_password_masking()  # importing prefect configured its console and API log handlers: mask them too
 
 
 def task_runner() -> Any:
@@ -54,6 +57,20 @@ def _logger() -> logging.Logger | logging.LoggerAdapter:
         return logging.getLogger("photoshape_flow.flows")
 
 
+def _name_claims() -> None:
+    """Claims made by this task name its flow run, so `photoshape status` shows which run holds them."""
+    from photoshape_flow.db.holder import set_worker_name
+
+    try:
+        from prefect.runtime import flow_run
+
+        name = flow_run.name
+    except Exception:  # outside a run (unit tests through .fn)
+        return
+    if name:
+        set_worker_name(f"prefect flow run {name}")
+
+
 def _profile(profile: str, overrides: list[str] | None) -> Any:
     from photoshape_flow.profiles import resolve_profile
 
@@ -76,9 +93,13 @@ def process_batch(stage: str, part: str, ids: list[int], profile: str, overrides
     """Claim the batch's items and run the stage on those won (see photoshape_flow.stages.run)."""
     from photoshape_flow.stages import WorkUnit, process
 
+    _name_claims()
     report = process(stage, WorkUnit(part, tuple(ids)), _profile(profile, overrides), stage_context())
     _logger().info("%s %s: %d done, %d skipped, %d failed of %d", stage, part, report.done, report.skipped,
                    report.failed, n)
+    if report.blocked.count:
+        _logger().warning("%s %s: %d items held by another live worker (%s)", stage, part, report.blocked.count,
+                          ", ".join(report.blocked.holders))
     return report.to_dict()
 
 
@@ -97,6 +118,7 @@ def run_whole_stage(stage: str, profile: str, overrides: list[str] | None = None
     """A stage that does not fan out (its pipeline function batches and resumes internally)."""
     from photoshape_flow.stages import run_stage
 
+    _name_claims()
     report = run_stage(stage, _profile(profile, overrides), stage_context(), work)
     _logger().info("%s finished in %.1f s", stage, report.seconds)
     return report.to_dict()

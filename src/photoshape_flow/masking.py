@@ -5,9 +5,14 @@ that URL is printed by `photoshape status`, `db current`, `doctor` and connectio
 reach a log line, which a Prefect worker forwards to the Prefect API for anyone with the UI to read.
 `mask_password` replaces the password in every URL (and in every ``password=...`` of a libpq
 connection string) within a text, leaving user, host and database readable.
-`PasswordMaskFilter` applies it to log records; `install_password_masking` runs that filter on every
-record as it is created (the record factory), so it holds for every logger and every handler,
-including those Prefect configures and its API log handler, not only the handlers known here.
+`PasswordMaskFilter` is a `logging.Filter` applying it to log records. `install_password_masking`
+puts it in two places: on every handler configured so far (the root's, the CLI's, and Prefect's
+console and API log handlers, which forward records to the Prefect UI), where it sees every record a
+handler emits, including records rebuilt from dicts (`logging.makeLogRecord`, queue and socket
+listeners, logs forwarded from Dask workers) that never passed through this process's record
+factory; and in the record factory, so records created here are masked even for handlers added
+later. Whoever configures handlers calls it again afterwards (the CLI's `setup_logging`, the flow
+modules after Prefect set up its logging on import).
 """
 
 from __future__ import annotations
@@ -52,11 +57,13 @@ _FILTER = PasswordMaskFilter()
 
 
 def install_password_masking() -> None:
-    """Run `PasswordMaskFilter` on every log record this process creates (idempotent).
+    """Mask passwords in every log record this process emits (idempotent; call again after new handlers).
 
-    A filter added to a handler would miss handlers configured later (Prefect's dictConfig replaces
-    them) and a logger filter misses child loggers, so the filter wraps the record factory instead.
+    The filter goes on every handler configured now (a logger's own filter would miss records
+    propagated from child loggers; a handler's sees them all) and wraps the record factory, so
+    handlers configured later still get masked records from this process.
     """
+    mask_handlers()
     previous = logging.getLogRecordFactory()
     if getattr(previous, "masks_passwords", False):
         return
@@ -68,3 +75,16 @@ def install_password_masking() -> None:
 
     factory.masks_passwords = True  # type: ignore[attr-defined]
     logging.setLogRecordFactory(factory)
+
+
+def mask_handlers() -> int:
+    """Add `PasswordMaskFilter` to the handlers of the root and of every logger that has any; returns how many."""
+    loggers = [logging.getLogger(), *(lg for lg in logging.root.manager.loggerDict.values()
+                                      if isinstance(lg, logging.Logger))]
+    added = 0
+    for logger in loggers:
+        for handler in logger.handlers:
+            if not any(isinstance(f, PasswordMaskFilter) for f in handler.filters):
+                handler.addFilter(_FILTER)
+                added += 1
+    return added

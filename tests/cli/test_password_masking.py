@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from photoshape_flow.cli import app
 from photoshape_flow.config import get_settings
-from photoshape_flow.masking import mask_password
+from photoshape_flow.masking import PasswordMaskFilter, install_password_masking, mask_password
 
 SECRET = "s3cret-Pa55"
 runner = CliRunner()
@@ -81,6 +81,37 @@ def test_logged_urls_are_masked_for_every_logger_and_handler() -> None:
     assert len(seen) == 3 and "ps:***@db/photo" in seen[0] and "ps:***@db/photo" in seen[1]
     assert "ConnectionError: cannot reach postgresql+psycopg://ps:***@db/photo" in seen[2]
     assert not any(SECRET in line for line in seen)
+
+
+def test_handlers_mask_records_that_never_passed_the_record_factory() -> None:
+    """Prefect's API log handler (what reaches the Prefect UI) and any handler configured before the install
+    carry the filter, so a record rebuilt from a dict (a queue or socket listener, a Dask worker's
+    forwarded log line) is masked too."""
+    import photoshape_flow.flows.tasks  # noqa: F401  (imports prefect, which configures its handlers)
+    from prefect.logging.handlers import APILogHandler
+
+    api = [h for h in logging.getLogger("prefect.flow_runs").handlers if isinstance(h, APILogHandler)]
+    assert api and all(any(isinstance(f, PasswordMaskFilter) for f in h.filters) for h in api)
+    seen: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            seen.append(self.format(record))
+
+    logger = logging.getLogger("photoshape_flow.pipeline.test_masking")
+    handler = Collect()
+    logger.addHandler(handler)
+    try:
+        install_password_masking()  # as the CLI and the flow modules do after configuring handlers
+        url = f"postgresql+psycopg://ps:{SECRET}@db/photo"
+        record = logging.makeLogRecord({"name": logger.name, "msg": "connecting to %s", "args": (url,),
+                                        "levelno": logging.WARNING, "levelname": "WARNING"})
+        assert SECRET in record.getMessage()  # built outside the factory: not masked yet
+        logger.handle(record)
+        assert api[0].filter(record) and SECRET not in record.getMessage()
+    finally:
+        logger.removeHandler(handler)
+    assert seen == ["connecting to postgresql+psycopg://ps:***@db/photo"]
 
 
 @pytest.mark.postgres

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import datetime as dt
+
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
@@ -55,6 +57,9 @@ def seed(session: Session, suffix: str = "") -> dict[str, int]:
         m.Evaluation(run=f"run{suffix}", stage="inference", method="classifier", metric="material_top1", value=0.5),
         m.Grade(pair_id=pair.id, label="good"),
         m.WorkClaim(stage="fine-alignment", item_key=f"pair:{pair.id}", state="done"),
+        m.WorkClaim(stage="coarse-alignment:shapes", item_key=f"{shape.id}{suffix}", state="claimed",
+                    worker="worker-2:4242", holder_host="worker-2", holder_pid=4242, holder_started="1234",
+                    holder_name="photoshape run", lease_expires_at=utcnow() + dt.timedelta(hours=1)),
         m.PipelineRun(origin="cli", profile_name="small", overrides={"training.epochs": "3"},
                       profile={"name": "small", "training": {"epochs": 3}}, stages=["training"],
                       reports={"training": {"done": 1}}, status="ok"),

@@ -178,3 +178,14 @@ def test_a_part_smaller_than_any_training_region_takes_the_substance_networks_su
     legs = _shrink_legs_and_classify(aligned_pair, store)[aligned_pair["legs"]]
     assert legs.params.get("classifier_head") is False
     assert legs.substance == "fabric" and legs.material_id == aligned_pair["grey_fabric"]
+
+
+def test_pairs_a_live_worker_holds_are_reported_blocked_not_skipped(aligned_pair: dict[str, int]) -> None:
+    from photoshape_flow.db import claims
+
+    with session_scope() as session:
+        claims.claim(session, "inference:color-match", [str(aligned_pair["pair"])], worker="other-worker",
+                     lease_seconds=900)
+    summary = run_inference("color-match")
+    assert (summary.pairs_done, summary.pairs_skipped) == (0, 0)
+    assert [(h.worker, h.count) for h in summary.blocked] == [("other-worker", 1)]

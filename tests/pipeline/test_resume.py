@@ -32,6 +32,11 @@ KILL_POINTS: list[tuple[str, str]] = [
     ("during fine alignment", "SELECT COUNT(*) FROM alignment"),
     ("during the bootstrap renders", "SELECT COUNT(*) >= 4 FROM rendering WHERE kind = 'bootstrap'"),
     ("during classifier training", "SELECT COUNT(*) FROM classifier WHERE kind = 'material'"),
+    # a killed holder's claims are taken over at once by the resumed run (its pid is gone), not after the lease
+    ("during inference, claims held",
+     "SELECT COUNT(*) FROM work_claim WHERE stage LIKE 'inference:%' AND state = 'claimed'"),
+    ("during publish, claims held",
+     "SELECT COUNT(*) FROM work_claim WHERE stage LIKE 'publish:%' AND state = 'claimed'"),
 ]
 
 

@@ -9,7 +9,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from photoshape_flow.export.text import one_line
-from photoshape_flow.masking import mask_password
+from photoshape_flow.masking import install_password_masking, mask_password
 
 console = Console()
 err_console = Console(stderr=True)
@@ -39,6 +39,7 @@ def setup_logging(verbose: bool) -> None:
         handlers=[RichHandler(console=err_console, show_path=False)],
         force=True,
     )
+    install_password_masking()  # the new handler masks passwords too
 
 
 def get_store():  # type: ignore[no-untyped-def]

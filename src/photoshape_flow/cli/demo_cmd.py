@@ -21,11 +21,13 @@ def demo(
     seed: int = typer.Option(None, help="Seed of the generated collections (default: PHOTOSHAPE_SEED)."),
     evaluate: bool = typer.Option(True, help="Score every stage against the ground truth at the end."),
     prefect: bool = typer.Option(False, help="Run the stages as the photoshape-pipeline Prefect flow."),
+    wait: bool = typer.Option(False, "--wait", help="Wait for items another live worker holds (default: say so "
+                              "and exit with code 3)."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Generate procedural shapes, SVBRDFs, studio envmaps and photo-like exemplars, then run every stage."""
     from photoshape_flow.cli.eval_cmd import print_metrics
-    from photoshape_flow.cli.run_cmd import print_reports
+    from photoshape_flow.cli.run_cmd import print_reports, run_reporting_blocked
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import migrate
     from photoshape_flow.demo import generate_demo
@@ -55,10 +57,12 @@ def demo(
     if prefect:
         from photoshape_flow.flows.pipeline import photoshape_pipeline
 
-        reports = run_all(profile, ctx, names=["ingest"], ingest=request, origin="demo", on_stage=announce)
+        reports = run_reporting_blocked(lambda: run_all(profile, ctx, names=["ingest"], ingest=request, origin="demo",
+                                                        on_stage=announce, wait=wait))
         photoshape_pipeline(profile=size.value, stages=[s for s in STAGE_NAMES if s != "ingest"])
     else:
-        reports = run_all(profile, ctx, ingest=request, origin="demo", on_stage=announce)
+        reports = run_reporting_blocked(lambda: run_all(profile, ctx, ingest=request, origin="demo",
+                                                        on_stage=announce, wait=wait))
     print_reports(reports)
     if evaluate:
         from photoshape_flow.pipeline.evaluate import run_evaluation

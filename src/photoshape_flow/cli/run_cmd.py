@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, require_database, resolve_profile_or_fail, setup_logging
+from photoshape_flow.cli.common import (
+    console,
+    err_console,
+    fail,
+    require_database,
+    resolve_profile_or_fail,
+    setup_logging,
+)
 from photoshape_flow.profiles import PROFILES
+
+BLOCKED_EXIT_CODE = 3  # another live worker holds items this run needed (see `photoshape status`)
 
 if TYPE_CHECKING:  # the registry imports the ORM: loaded when a command runs, not for every `photoshape`
     from photoshape_flow.stages import StageReport
@@ -24,6 +33,19 @@ def print_reports(reports: Sequence[StageReport], title: str = "stages run") -> 
         table.add_row(r.stage, str(r.done), str(r.skipped), str(r.failed), str(r.rejected), str(r.blocked.count),
                       f"{r.seconds:.1f}")
     console.print(table)
+
+
+def run_reporting_blocked(call: Callable[[], list[StageReport]]) -> list[StageReport]:
+    """`call` (a `run_all`), or, when it stopped at a stage another live worker holds, that stage's
+    one line (how many items, by whom, until when) and exit code 3 after the table of what did run."""
+    from photoshape_flow.stages.run import StageBlocked
+
+    try:
+        return call()
+    except StageBlocked as exc:
+        print_reports(exc.reports)
+        err_console.print(f"[bold yellow]blocked:[/] {exc}", highlight=False, soft_wrap=True)
+        raise typer.Exit(BLOCKED_EXIT_CODE) from None
 
 
 def profile_fields(data: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
@@ -47,6 +69,8 @@ def run(
     show_profile: bool = typer.Option(False, "--show-profile", help="Print the resolved profile's fields and exit."),
     pairs: list[int] = typer.Option(None, "--pair", help="publish only: render and export these pairs' "
                                     "PhotoShapes, whatever their rank (repeatable), then rewrite the gallery."),
+    wait: bool = typer.Option(False, "--wait", help="When another live worker holds some items, wait until "
+                              "they are free and do them (default: say so and exit with code 3)."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Run one stage (or all, in order); each resumes from what earlier runs recorded."""
@@ -68,8 +92,9 @@ def run(
     if pairs:
         print_reports([publish_pairs(resolved, stage_context(), pairs)], title="pairs published")
         return
-    reports = run_all(resolved, stage_context(), names=None if stage == "all" else [stage],
-                      on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)"))
+    reports = run_reporting_blocked(lambda: run_all(
+        resolved, stage_context(), names=None if stage == "all" else [stage], wait=wait,
+        on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")))
     print_reports(reports)
 
 

@@ -1,4 +1,4 @@
-"""`photoshape status`: rows per table and progress per stage."""
+"""`photoshape status`: rows per table, progress per stage, and the work claims held now."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ STAGE_COLUMNS = ("stage", "unit", "done", "pending", "failed", "rejected")
 
 
 def status() -> None:
-    """Counts per table and per stage: done / pending / failed / rejected."""
+    """Counts per table and per stage: done / pending / failed / rejected; claims held and by whom."""
+    from photoshape_flow.cli.claims_cmd import holds_table
     from photoshape_flow.config import get_settings
+    from photoshape_flow.db import claims
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.progress import assumed_profile, table_counts
     from photoshape_flow.stages import stage_progress
@@ -23,6 +25,7 @@ def status() -> None:
         stages = stage_progress(session)
         tables = table_counts(session)
         assumed = assumed_profile(session)
+        holds = claims.holds(session)
     console.print(f"database: {shown_database_url()}", highlight=False)
     console.print(f"data root: {settings.data_root.resolve()}", highlight=False)
     console.print(f"counts assume {assumed.describe()}", highlight=False, soft_wrap=True)
@@ -41,6 +44,8 @@ def status() -> None:
         detail = "" if set(counts) == {"rows"} else ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
         tt.add_row(name, str(total), detail)
     console.print(tt)
+    if holds:  # work in progress elsewhere, or left behind by a dead worker (`photoshape claims release`)
+        console.print(holds_table(holds))
 
 
 def register(app: typer.Typer) -> None:

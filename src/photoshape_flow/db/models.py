@@ -378,8 +378,9 @@ class Grade(TimestampMixin, Base):
 class WorkClaim(TimestampMixin, ParamsHashMixin, Base):
     """Ledger of per-item stage work shared by several workers: claimed (with a lease), done or failed.
 
-    A claim whose lease has expired may be taken by another worker, so a killed worker's items
-    are picked up again; `done` rows make re-runs skip finished items.
+    A claim whose lease has expired, or whose holder is provably dead (same host, process gone or
+    its pid reused: `db.holder`), may be taken by another worker, so a killed worker's items are
+    picked up again; `done` rows make re-runs skip finished items. Live holders renew their lease.
     """
 
     __tablename__ = "work_claim"
@@ -393,6 +394,11 @@ class WorkClaim(TimestampMixin, ParamsHashMixin, Base):
     lease_expires_at: Mapped[dt.datetime | None]
     attempts: Mapped[int] = mapped_column(default=0)
     error: Mapped[str | None] = mapped_column(sa.Text)
+    holder_host: Mapped[str | None] = mapped_column(sa.String(128), comment="host name of the claiming process")
+    holder_pid: Mapped[int | None] = mapped_column(comment="its process id")
+    holder_started: Mapped[str | None] = mapped_column(
+        sa.String(32), comment="its start time (clock ticks since boot): a reused pid differs")
+    holder_name: Mapped[str | None] = mapped_column(sa.String(128), comment="worker name, e.g. photoshape run")
 
 
 class PipelineRun(Base):

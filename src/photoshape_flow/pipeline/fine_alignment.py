@@ -78,6 +78,13 @@ def _candidates(session: Session, pair_ids: Iterable[int] | None, method: str) -
     return [dict(row._mapping) for row in session.execute(query)]
 
 
+def expected_hashes(session: Session, pair_ids: Iterable[int], params: FineParams,
+                    method: str = DEFAULT_METHOD) -> dict[int, str]:
+    """pair id -> the params_hash its Alignment row must have to be up to date (active pairs only)."""
+    items = _candidates(session, pair_ids, method)
+    return {int(item["pair_id"]): alignment_hash(params, method, item) for item in items}
+
+
 class _MeshCache:
     """A few recently used meshes, so consecutive pairs of one shape reuse its loaded scene."""
 

@@ -70,6 +70,7 @@ class InferenceSummary:
     pairs_skipped: int = 0
     pairs_failed: list[tuple[int, str]] = field(default_factory=list)
     rows: int = 0
+    blocked: list[claims.Hold] = field(default_factory=list)  # pairs another live worker holds (not skipped)
 
 
 @dataclass
@@ -387,7 +388,9 @@ def run_inference(
             for key in keys:  # one claim per pair: each pair's rows carry their own hash
                 mine += claims.claim(session, stage, [key], params_hash=expected[int(key)],
                                      lease_seconds=settings.claim_lease_seconds, retry_failed=True)
-        summary.pairs_skipped += len(keys) - len(mine)
+            held = claims.live_holds(session, stage, [k for k in keys if k not in mine])
+        summary.blocked += held
+        summary.pairs_skipped += len(keys) - len(mine) - sum(h.count for h in held)
         for key in mine:
             pair_id = int(key)
             try:

@@ -43,6 +43,18 @@ def plan(ctx: StageContext, cfg: CoarseAlignmentConfig) -> list[WorkUnit]:
     return units
 
 
+def versions(ctx: StageContext, cfg: CoarseAlignmentConfig, unit: WorkUnit) -> dict[int, str]:
+    """A shape's mesh blob, an exemplar's image and mask blobs: re-ingesting new content re-opens the item."""
+    from photoshape_flow.db import models as m
+
+    columns = {"shapes": (m.Shape, m.Shape.mesh_blob), "exemplars": (m.Exemplar, m.Exemplar.image_blob)}
+    model, blob = columns[unit.part]
+    extra = m.Exemplar.mask_blob if unit.part == "exemplars" else sa.literal("")
+    with ctx.session() as session:
+        rows = session.execute(sa.select(model.id, blob, extra).where(model.id.in_(list(unit.ids))))
+        return {int(i): f"{a}/{b}" for i, a, b in rows}
+
+
 def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline import coarse_alignment as coarse
 

@@ -18,6 +18,15 @@ def plan(ctx: StageContext, cfg: FineAlignmentConfig) -> list[WorkUnit]:
         return [WorkUnit("pairs", tuple(session.execute(active_pairs().order_by(m.Pair.id)).scalars()))]
 
 
+def versions(ctx: StageContext, cfg: FineAlignmentConfig, unit: WorkUnit) -> dict[int, str]:
+    """Each pair's expected alignment hash (mesh, exemplar, camera): a moved camera re-opens the pair."""
+    from photoshape_flow.align.fine import FineParams
+    from photoshape_flow.pipeline.fine_alignment import expected_hashes
+
+    with ctx.session() as session:
+        return expected_hashes(session, unit.ids, FineParams(size=cfg.size))
+
+
 def run(ctx: StageContext, cfg: FineAlignmentConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.align.fine import FineParams
     from photoshape_flow.pipeline.fine_alignment import run_fine_alignment

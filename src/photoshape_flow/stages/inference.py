@@ -11,7 +11,7 @@ import logging
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import InferenceConfig
 from photoshape_flow.stages.context import StageContext
-from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.report import StageReport, blocked_by
 from photoshape_flow.stages.work import WorkUnit
 
 NAME = "inference"
@@ -56,6 +56,7 @@ def _run_method(ctx: StageContext, cfg: InferenceConfig, method: str, pair_ids: 
     summary = run_inference(method, pair_ids=pair_ids, top_k=cfg.top_k, settings=ctx.settings)
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
+        blocked=blocked_by(summary.blocked),
         details={summary.method_key: {"pairs": summary.pairs_done, "rows": summary.rows,
                                       "failed": summary.pairs_failed[:20]}},
     )

@@ -29,6 +29,20 @@ def plan(ctx: StageContext, cfg: PublishConfig) -> list[WorkUnit]:
         return [WorkUnit("pairs", tuple(ids))]
 
 
+def versions(ctx: StageContext, cfg: PublishConfig, unit: WorkUnit) -> dict[int, str]:
+    """Each pair's rank-1 assignment-set key of the method it is published with (its newest classifier).
+
+    A new classifier's (or a re-ranked) assignment changes the key, so the pair is claimed and
+    rendered again, by `photoshape run publish` and the Prefect deployment alike.
+    """
+    from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
+
+    with ctx.session() as session:
+        shown = candidate_method_keys(session, None, unit.ids)
+        keys = assignment_set_keys(session, shown)
+    return {pair_id: keys[(pair_id, method_key)] for pair_id, method_key in shown if (pair_id, method_key) in keys}
+
+
 def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline.publish import run_publish
 

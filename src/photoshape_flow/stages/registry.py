@@ -2,8 +2,9 @@
 
 `photoshape run`, `photoshape status`, the work claims, the Prefect flows, the deployments and the
 checks on `prefect.yaml` all read `REGISTRY`; no other table maps stage names to code. A new stage
-is one module with `run(ctx, cfg, work=None) -> StageReport` (plus `plan`/`finish` if it fans out),
-one config dataclass on `Profile`, and one entry here.
+is one module with `run(ctx, cfg, work=None) -> StageReport` (plus `plan`/`finish` if it fans out,
+and `versions` if an item's inputs can change under the same id), one config dataclass on
+`Profile`, and one entry here.
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ class Stage:
     progress: Callable[[Session], progress.StageProgress]
     plan: Callable[[StageContext, Any], list[WorkUnit]] | None = None  # set: the stage fans out
     finish: Callable[[StageContext, Any], StageReport] | None = None  # after every unit of a fan-out
+    # a unit's item id -> key of its inputs: a done item whose key changed is claimed again (an id
+    # left out is keyed by the config alone); given the unit, not its ids, since parts differ
+    versions: Callable[[StageContext, Any, WorkUnit], dict[int, str]] | None = None
     batch_size: int = 32  # items per unit of work in a fan-out
     claims_itself: bool = False  # the pipeline claims its items (finer than a batch)
     exclusive: bool = False  # whole-stage work that must not run twice at once (one flow run at a time)
@@ -71,12 +75,12 @@ REGISTRY: tuple[Stage, ...] = (
         coarse_alignment.run, reads=("shape", "exemplar"),
         writes=("viewpoint_set", "view_feature", "exemplar_feature", "exemplar_match", "pair"),
         progress=progress.coarse_alignment_progress, plan=coarse_alignment.plan, finish=coarse_alignment.finish,
-        batch_size=8,
+        batch_size=8, versions=coarse_alignment.versions,
     ),
     Stage(
         "fine-alignment", "Project each pair's parts, flow-warp them onto the exemplar, clean with a dense CRF.",
         fine_alignment.run, reads=("pair", "shape", "exemplar"), writes=("alignment", "rendering"),
-        progress=progress.fine_alignment_progress, plan=fine_alignment.plan,
+        progress=progress.fine_alignment_progress, plan=fine_alignment.plan, versions=fine_alignment.versions,
     ),
     Stage(
         "substances", "Bootstrap renders, the substance network, and a substance per aligned part.",
@@ -103,6 +107,7 @@ REGISTRY: tuple[Stage, ...] = (
         "publish", "PhotoShape renders and exports of the best pairs, then the gallery.",
         publish.run, reads=("assignment", "pair", "shape", "material", "envmap"), writes=("rendering",),
         progress=progress.publish_progress, plan=publish.plan, finish=publish.finish, batch_size=8,
+        versions=publish.versions,
     ),
 )
 

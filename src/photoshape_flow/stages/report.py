@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as dt
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 
 @dataclass(frozen=True)
@@ -15,6 +15,22 @@ class Blocked:
     count: int = 0
     holders: tuple[str, ...] = ()
     until: dt.datetime | None = None
+
+
+class _Hold(Protocol):  # db.claims.Hold, without importing the database layer here
+    count: int
+    until: dt.datetime | None
+
+    def describe(self) -> str: ...
+
+
+def blocked_by(holds: list[Any]) -> Blocked:
+    """The `Blocked` of live claims another worker holds (`db.claims.live_holds`)."""
+    typed: list[_Hold] = holds
+    if not typed:
+        return Blocked()
+    return Blocked(sum(h.count for h in typed), tuple(dict.fromkeys(h.describe() for h in typed)),
+                   max((h.until for h in typed if h.until is not None), default=None))
 
 
 @dataclass
