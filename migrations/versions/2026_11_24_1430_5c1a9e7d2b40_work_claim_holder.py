@@ -1,7 +1,7 @@
 """work claim holder: host, pid, process start time and worker name of each claim
 
 Revision ID: 5c1a9e7d2b40
-Revises: 90238d22ce60
+Revises: 5c1e7b2d9f40
 Create Date: 2026-11-24 14:30:00.000000
 
 Four nullable columns: existing claims keep only their `worker` string (their holder is never
@@ -16,7 +16,7 @@ import sqlalchemy as sa
 from alembic import op
 
 revision: str = '5c1a9e7d2b40'
-down_revision: str | None = '90238d22ce60'
+down_revision: str | None = '5c1e7b2d9f40'
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 

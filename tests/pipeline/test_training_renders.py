@@ -149,3 +149,15 @@ def test_units_of_a_fan_out_render_what_one_call_renders(db_url: str, store, tmp
     assert sum(r.done for r in reports) == 5
     assert {r.key: r.params_hash for r in _renderings(url, "bootstrap")} == expected
     assert sum(process("substances", u, profile, ctx).done for u in units) == 0  # claimed and done: skipped
+
+    def attempts() -> list[int]:
+        with session_scope(url) as session:
+            return sorted(session.execute(sa.select(m.WorkClaim.attempts).where(
+                m.WorkClaim.stage == "substances:bootstrap")).scalars())
+
+    assert attempts() == [1] * 5
+    with session_scope(url) as session:  # a material is added: the pools change, the claims re-open
+        session.add(m.Material(name="added", substance="wood", enabled=True, status="ok"))
+    for unit in units:
+        process("substances", unit, profile, ctx)
+    assert attempts() == [2] * 5

@@ -86,12 +86,13 @@ REGISTRY: tuple[Stage, ...] = (
         "substances", "Bootstrap renders, the substance network, and a substance per aligned part.",
         substances.run, reads=("alignment", "material", "envmap", "shape"),
         writes=("rendering", "classifier", "part_substance"), progress=progress.substances_progress,
-        plan=substances.plan, finish=substances.finish, batch_size=16, exclusive=True,
+        plan=substances.plan, finish=substances.finish, batch_size=16, versions=substances.versions, exclusive=True,
     ),
     Stage(
         "training-renders", "Randomized renders conditioned on part substances (section 5.1), resumable.",
         training_renders.run, reads=("part_substance", "material", "envmap", "shape"), writes=("rendering",),
         progress=progress.training_renders_progress, plan=training_renders.plan, batch_size=16,
+        versions=training_renders.versions,
     ),
     Stage(
         "training", "Train (or resume, or fine-tune when materials were added) the material classifier.",

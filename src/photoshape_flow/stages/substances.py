@@ -21,6 +21,15 @@ def plan(ctx: StageContext, cfg: SubstancesConfig) -> list[WorkUnit]:
     return [WorkUnit("bootstrap", tuple(range(cfg.bootstrap_count)))]
 
 
+def versions(ctx: StageContext, cfg: SubstancesConfig, unit: WorkUnit) -> dict[int, str]:
+    """Every item of the unit carries the digest of the pools its spec is drawn from."""
+    from photoshape_flow.pipeline.training_renders import pools_digest
+
+    with ctx.session() as session:
+        digest = pools_digest(session, "bootstrap")
+    return dict.fromkeys(unit.ids, digest)
+
+
 def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline.substances import run_substances
 

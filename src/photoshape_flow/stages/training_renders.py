@@ -19,6 +19,15 @@ def plan(ctx: StageContext, cfg: TrainingRendersConfig) -> list[WorkUnit]:
     return [WorkUnit("training", tuple(range(cfg.count)))]
 
 
+def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> dict[int, str]:
+    """Every item of the unit carries the digest of the pools its spec is drawn from."""
+    from photoshape_flow.pipeline.training_renders import pools_digest
+
+    with ctx.session() as session:
+        digest = pools_digest(session, "training")
+    return dict.fromkeys(unit.ids, digest)
+
+
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
     from photoshape_flow.pipeline.training_renders import run_training_renders
 
