@@ -1,0 +1,42 @@
+"""Which ground-truth file `photoshape eval` and the `evaluate` deployment score against by default.
+
+Every evaluation registers its file (table `groundtruth_file`, keyed by absolute path, with the
+sha256 it had); the default is the most recently used registered file that still exists, else the
+newest demo's groundtruth.json under the data root, so a fresh demo evaluates with no argument.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.db import models as m
+from photoshape_flow.db.base import utcnow
+from photoshape_flow.db.upsert import upsert
+from photoshape_flow.pipeline.groundtruth_format import GroundTruthFile
+
+
+def register_groundtruth(session: Session, gt: GroundTruthFile, matched: int, skipped: int) -> None:
+    """Record (or refresh) the file as the latest used, with its hash and how many entries counted."""
+    upsert(session, m.GroundTruthFileRow, {
+        "path": str(Path(gt.path).resolve()), "sha256": gt.sha256, "version": gt.version,
+        "entries": matched, "skipped": skipped, "used_at": utcnow(),
+    }, key=["path"])
+
+
+def registered_groundtruth(session: Session) -> Path | None:
+    """The most recently used registered file that is still on disk (None when there is none)."""
+    rows = session.execute(
+        sa.select(m.GroundTruthFileRow.path).order_by(m.GroundTruthFileRow.used_at.desc(),
+                                                      m.GroundTruthFileRow.id.desc())
+    ).scalars()
+    return next((Path(p) for p in rows if Path(p).is_file()), None)
+
+
+def default_groundtruth(session: Session, data_root: Path) -> Path | None:
+    """The registered file, else the newest demo's ground truth (None: nothing to score against)."""
+    from photoshape_flow.demo import newest_groundtruth
+
+    return registered_groundtruth(session) or newest_groundtruth(data_root)
