@@ -16,8 +16,8 @@ def print_rows(title: str, rows: Sequence[dict[str, str]]) -> None:
     if not rows:
         return
     table = Table(title=title, title_justify="left")
-    for i, col in enumerate(rows[0]):
-        table.add_column(col, justify="left" if i == 0 else "right")
+    for i, col in enumerate(rows[0]):  # the first column names the row: never cut
+        table.add_column(col, justify="left" if i == 0 else "right", no_wrap=i == 0)
     for row in rows:
         table.add_row(*row.values())
     console.print(table)
@@ -25,16 +25,14 @@ def print_rows(title: str, rows: Sequence[dict[str, str]]) -> None:
 
 def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
     """The headline (ours vs each baseline, the shared stages' main figures), then every figure."""
-    from photoshape_flow.pipeline.eval_tables import headline_rows, stage_rows
+    from photoshape_flow.pipeline.eval_tables import HEADLINE_TITLE, STAGES_TITLE, headline_rows, stage_rows
     from photoshape_flow.pipeline.evaluate import metrics_table
 
-    print_rows("headline: ours vs each baseline (per scored part; RMSE/SSIM per re-rendered pair)",
-               headline_rows(metrics))
-    print_rows("headline: shared stages", [{"figure": r["figure"], "value": r["value"], "over": r["over"]}
-                                           for r in stage_rows(metrics)])
+    print_rows(f"headline: {HEADLINE_TITLE}", headline_rows(metrics))
+    print_rows(f"headline, {STAGES_TITLE}", stage_rows(metrics))
     table = Table(title="every figure", title_justify="left")
     for col in ("stage", "method", "metric", "value", "count"):
-        table.add_column(col, justify="right" if col in ("value", "count") else "left")
+        table.add_column(col, justify="right" if col in ("value", "count") else "left", overflow="fold")
     for row in metrics_table(metrics):
         value = "" if row["value"] is None else f"{row['value']:.4f}"
         count = "" if row["count"] is None else str(row["count"])
