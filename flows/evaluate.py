@@ -12,20 +12,12 @@ from prefect.artifacts import create_table_artifact
 
 @task(name="run-evaluation")
 def run_evaluation_task(groundtruth: str | None, run: str | None, source: str | None) -> dict[str, Any]:
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.eval_tables import headline_rows, stage_rows
     from photoshape_flow.pipeline.evaluate import metrics_table, run_evaluation
-    from photoshape_flow.pipeline.groundtruth_registry import default_groundtruth
+    from photoshape_flow.pipeline.groundtruth_registry import resolve_groundtruth
 
-    if groundtruth is None:
-        settings = get_settings()
-        with session_scope(settings.resolved_database_url) as session:
-            found = default_groundtruth(session, settings.data_root)
-        if found is None:
-            raise ValueError("no ground truth given, none registered and no demo under the data root: "
-                             "pass groundtruth (docs/evaluation.md) or run `photoshape demo`")
-        groundtruth = str(found)
+    path, _ = resolve_groundtruth(groundtruth)
+    groundtruth = str(path)
     logger = get_run_logger()
     name, metrics = run_evaluation(groundtruth, run, exemplar_source=source, on_problem=logger.warning)
     return {"run": name, "groundtruth": groundtruth, "headline": headline_rows(metrics),

@@ -131,7 +131,7 @@ def test_eval_groundtruth_scores_the_good_entries_and_names_each_bad_one(
     stages = ["--stage", "substances", "--stage", "inference", "--stage", "fine-alignment"]
     result = runner.invoke(app, ["eval", "--groundtruth", str(path), "--run", "mine", *stages])
     assert result.exit_code == 0, result.output
-    lines = [line for line in result.output.splitlines() if line.startswith("skipped ")]
+    lines = [line for line in result.output.splitlines() if line.endswith("; skipped")]
     assert len(lines) == len(skipped), lines  # one line per bad entry, each naming it
     for name, reason in zip(skipped, ("unknown materials: unobtainium", "missing parts of shape demo-tiny/",
                                       "is not ingested (say \"in_collection\": false", "ex_0999 is not ingested",
@@ -167,7 +167,7 @@ def test_eval_groundtruth_scores_the_good_entries_and_names_each_bad_one(
 
 def test_eval_fails_in_one_line_on_a_foreign_file_or_when_nothing_matches(migrated: str, tmp_path: Path) -> None:
     nothing = runner.invoke(app, ["eval"])  # no file given, none registered, no demo under the data root
-    assert nothing.exit_code == 1 and "pass--groundtruthFILE" in flat(nothing.output), nothing.output
+    assert nothing.exit_code == 1 and "passone(--groundtruthFILE" in flat(nothing.output), nothing.output
     cases: list[tuple[Any, str]] = [
         ({"version": 1, "exemplars": {}}, "a pre-format demo file"),
         ({"format": "photoshape-groundtruth", "version": 2, "exemplars": [{"source_id": "nobody", "shape": {

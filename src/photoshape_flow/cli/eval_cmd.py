@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from photoshape_flow.cli.common import console, fail, require_database
@@ -32,7 +33,8 @@ def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
     print_rows(f"headline, {STAGES_TITLE}", stage_rows(metrics))
     table = Table(title="every figure", title_justify="left")
     for col in ("stage", "method", "metric", "value", "count"):
-        table.add_column(col, justify="right" if col in ("value", "count") else "left", overflow="fold")
+        table.add_column(col, justify="right" if col in ("value", "count") else "left", overflow="fold",
+                         no_wrap=col == "metric")  # metric names stay whole; stage and method fold
     for row in metrics_table(metrics):
         value = "" if row["value"] is None else f"{row['value']:.4f}"
         count = "" if row["count"] is None else str(row["count"])
@@ -41,7 +43,8 @@ def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
 
 
 def print_problem(message: str) -> None:
-    console.print(f"[yellow]skipped[/] {message}", highlight=False, soft_wrap=True)
+    """One ground-truth entry left out: one line, as the matcher wrote it (it ends in "skipped")."""
+    console.print(f"[yellow]{escape(message)}[/]", highlight=False, soft_wrap=True)
 
 
 def eval_command(
@@ -56,21 +59,16 @@ def eval_command(
     """Compare pipeline outputs with ground truth; prints a headline and every figure, stores them in
     `evaluation` (tagged with the file's sha256) and registers the file as the next default."""
     require_database()
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.evaluate import EVAL_STAGES, run_evaluation
-    from photoshape_flow.pipeline.groundtruth_registry import default_groundtruth
+    from photoshape_flow.pipeline.groundtruth_registry import resolve_groundtruth
 
     if path is not None and groundtruth is not None and path != groundtruth:
         fail(f"two ground truths given ({path} and --groundtruth {groundtruth}); give one")
-    chosen = groundtruth or path
-    if chosen is None:
-        settings = get_settings()
-        with session_scope(settings.resolved_database_url) as session:
-            chosen = default_groundtruth(session, settings.data_root)
-        if chosen is None:
-            fail("no ground truth given, none registered and no demo under the data root; "
-                 "pass --groundtruth FILE (docs/evaluation.md) or run `photoshape demo`")
+    try:
+        chosen, defaulted = resolve_groundtruth(groundtruth or path)
+    except ValueError as exc:
+        fail(str(exc))
+    if defaulted:
         console.print(f"ground truth: {chosen}", highlight=False)
     if not chosen.is_file():
         fail(f"{chosen}: no such file")

@@ -12,10 +12,15 @@ from pathlib import Path
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.base import utcnow
+from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.pipeline.groundtruth_format import GroundTruthFile
+
+NO_GROUNDTRUTH = ("no ground truth given, none registered and no demo under the data root: pass one "
+                  "(--groundtruth FILE, format in docs/evaluation.md) or run `photoshape demo`")
 
 
 def register_groundtruth(session: Session, gt: GroundTruthFile, matched: int, skipped: int) -> None:
@@ -40,3 +45,16 @@ def default_groundtruth(session: Session, data_root: Path) -> Path | None:
     from photoshape_flow.demo import newest_groundtruth
 
     return registered_groundtruth(session) or newest_groundtruth(data_root)
+
+
+def resolve_groundtruth(given: str | Path | None, settings: Settings | None = None) -> tuple[Path, bool]:
+    """The file to score against and whether it was a default (`eval` without a file, the deployment's
+    Quick run); raises ValueError with NO_GROUNDTRUTH when there is none."""
+    if given is not None:
+        return Path(given), False
+    settings = settings or get_settings()
+    with session_scope(settings.resolved_database_url) as session:
+        found = default_groundtruth(session, settings.data_root)
+    if found is None:
+        raise ValueError(NO_GROUNDTRUTH)
+    return found, True
