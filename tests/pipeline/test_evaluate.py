@@ -373,6 +373,82 @@ def test_exemplars_outside_the_source_or_not_ok_have_no_truth(db_url: str, store
         assert match_groundtruth(session, gt, None).truths == {}
 
 
+# --- entries without a mask, material masks --------------------------------------------------------
+
+
+def rewrite_entries(path: Path, edit: Any) -> None:
+    """Apply `edit(entries)` to the ground-truth file in place."""
+    data = json.loads(path.read_text())
+    edit(data["exemplars"])
+    path.write_text(json.dumps(data))
+
+
+def test_without_a_mask_parts_are_scored_by_name_on_the_true_shape_only(
+    db_url: str, store: BlobStore, tmp_path: Path
+) -> None:
+    """No mask: each of the chair's six parts is scored against the entry's part of the same name (all
+    of them: visibility is unknown), and only on pairs of the chair. Ours: seat, legs, hidden and
+    apron right, back only 2nd (top-5), cushion wrong -> top-1 4/6, top-5 5/6; the first choice's
+    substance: back (walnut: wood for leather) and cushion (steel: metal for fabric) wrong -> 4/6.
+    'other' shows the chair too but its pair is with a stool: not scored (it would add a 0)."""
+    made = build_scene(db_url, store, tmp_path / "demo", {"photo": TRUTH, "other": TRUTH}, {"photo": PART_MAP})
+    named = {"seat": "red_leather", "back": "blue_leather", "legs": "walnut", "cushion": "grey_fabric",
+             "hidden": "steel", "apron": "oak"}
+
+    def drop_masks(entries: list[dict[str, Any]]) -> None:
+        for e in entries:
+            del e["mask"]
+            e["parts"] = {n: {"material": mat, "substance": MATERIALS[mat]} for n, mat in named.items()}
+
+    rewrite_entries(made.groundtruth, drop_masks)
+    with session_scope(db_url) as session:
+        stool = m.Shape(source="t", source_id="stool")
+        session.add(stool)
+        session.flush()
+        session.add(m.Part(shape_id=stool.id, index=1, name="seat"))
+        made.pairs["other"] = add_pair(session, store, stool.id, made.exemplars["other"], part_grid(PART_MAP))
+    add_assignments(db_url, made, "photo", "classifier:1", {
+        1: ["red_leather"], 2: ["walnut", "blue_leather"], 3: ["walnut"], 4: ["steel"], 5: ["steel"], 6: ["oak"]})
+    with session_scope(db_url) as session:
+        session.add(m.Assignment(pair_id=made.pairs["other"], part_id=session.execute(
+            sa.select(m.Part.id).where(m.Part.shape_id == stool.id)).scalar_one(), method="classifier",
+            method_key="classifier:1", rank=1, material_id=made.materials["steel"]))
+    truths = truths_of(db_url, made)
+    assert len(truths) == 2
+    with session_scope(db_url) as session:
+        metrics = by_name(ev.evaluate_inference(session, store, truths, rerender_max_pairs=0))
+    assert metrics[("classifier:1", "material_top1")] == (pytest.approx(4 / 6), 6)
+    assert metrics[("classifier:1", "material_top5")] == (pytest.approx(5 / 6), 6)
+    assert metrics[("classifier:1", "substance_accuracy")] == (pytest.approx(4 / 6), 6)
+
+
+def test_a_material_mask_scores_like_the_part_mask_it_summarises(db_url: str, store: BlobStore, scene: Scene) -> None:
+    """The main photo's parts relabelled by material (seat red_leather, back blue_leather, both legs
+    walnut) must give every figure the part mask gives: scoring already merges parts of one material.
+    Substances come from the material table; an unknown material in a mask skips its entry."""
+    with session_scope(db_url) as session:
+        by_part = by_name(ev.evaluate_inference(session, store, truths_of(db_url, scene), rerender_max_pairs=0))
+        by_part_substances = ev.evaluate_substances(session, store, truths_of(db_url, scene))
+
+    def to_materials(entries: list[dict[str, Any]]) -> None:
+        (e,) = entries
+        names = {name: mat for name, mat, _ in GT_PARTS.values()}
+        e["mask"] = {"path": e["mask"]["path"], "kind": "material",
+                     "values": {v: names[part] for v, part in e["mask"]["values"].items()}}
+        entries.append(dict(e, source_id="photo2", mask=dict(e["mask"], values={"1": "nope"})))
+
+    rewrite_entries(scene.groundtruth, to_materials)
+    with session_scope(db_url) as session:
+        matched = match_groundtruth(session, read_groundtruth_file(scene.groundtruth))
+        (truth,) = matched.truths.values()
+        assert truth.material_substances == {"red_leather": "leather", "blue_leather": "leather", "walnut": "wood"}
+        assert truth.part_names == {}  # no part-label accuracy from a material mask
+        assert matched.problems == ("exemplars[1] (photo2): exemplar photo2 is not ingested (or not ok); "
+                                    "unknown materials: nope; skipped",)  # every reason, one line
+        assert by_name(ev.evaluate_inference(session, store, matched.truths, rerender_max_pairs=0)) == by_part
+        assert ev.evaluate_substances(session, store, matched.truths) == by_part_substances
+
+
 # --- re-render error ---------------------------------------------------------------------------------
 
 
