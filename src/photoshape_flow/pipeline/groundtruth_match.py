@@ -92,21 +92,8 @@ def match_groundtruth(session: Session, gt: GroundTruthFile, source: str | None 
             reasons.append(f"exemplar {entry.exemplar} matches {_describe(found)}: give its source")
         elif found[0][0] in truths:
             reasons.append(f"exemplar {found[0][1]}/{found[0][2]} already has an entry")
-        shape = shapes.find(entry.shape_ref)
-        resolved = entry
-        if len(shape) > 1:
-            reasons.append(f"shape {entry.shape_ref} matches {_describe(shape)}: give its source")
-        elif shape:
-            shape_id, shape_source, shape_source_id = shape[0]
-            if entry.mask is None:  # names are then the only link between the truth and the shape's parts
-                reasons += _part_name_reasons(entry, f"{shape_source}/{shape_source_id}", shape_parts[shape_id])
-            resolved = dataclasses.replace(
-                entry, shape_ref=ItemRef(shape_source, shape_source_id),
-                in_collection=True if entry.in_collection is None else entry.in_collection)
-        elif entry.in_collection is False:
-            resolved = entry  # a shape deliberately outside the collection (retrieval's nearest-shape case)
-        else:
-            reasons.append(f"shape {entry.shape_ref} is not ingested (say \"in_collection\": false if that is meant)")
+        resolved, shape_reasons = _resolve_shape(entry, shapes, shape_parts)
+        reasons += shape_reasons
         reasons += _material_reasons(entry, substances)
         if entry.mask is not None and not Path(entry.mask.path).is_file():
             reasons.append(f"mask {entry.mask.path} not found")
@@ -119,6 +106,26 @@ def match_groundtruth(session: Session, gt: GroundTruthFile, source: str | None 
         truths[found[0][0]] = resolved
         source_ids[found[0][0]] = found[0][2]
     return MatchedTruth(truths, tuple(problems), source_ids)
+
+
+def _resolve_shape(entry: TruthEntry, shapes: _RefIndex, shape_parts: dict[int, set[str]]
+                   ) -> tuple[TruthEntry, list[str]]:
+    """The entry with its shape named as the database names it and its membership decided, and what is
+    wrong with its shape (unknown, ambiguous, or parts that differ when there is no mask)."""
+    found = shapes.find(entry.shape_ref)
+    if len(found) > 1:
+        return entry, [f"shape {entry.shape_ref} matches {_describe(found)}: give its source"]
+    if not found:
+        if entry.in_collection is False:  # deliberately outside the collection (retrieval's nearest-shape case)
+            return entry, []
+        return entry, [f"shape {entry.shape_ref} is not ingested (say \"in_collection\": false if that is meant)"]
+    shape_id, shape_source, shape_source_id = found[0]
+    reasons = []
+    if entry.mask is None:  # names are then the only link between the truth and the shape's parts
+        reasons = _part_name_reasons(entry, f"{shape_source}/{shape_source_id}", shape_parts[shape_id])
+    resolved = dataclasses.replace(entry, shape_ref=ItemRef(shape_source, shape_source_id),
+                                   in_collection=True if entry.in_collection is None else entry.in_collection)
+    return resolved, reasons
 
 
 def _part_name_reasons(entry: TruthEntry, shape: str, on_shape: set[str]) -> list[str]:
