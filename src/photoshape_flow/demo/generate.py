@@ -5,7 +5,8 @@ Writes <out_dir>/
     materials/<name>/               SVBRDF folders with material.json (ingest input)
     envmaps/<name>.hdr              studio environment maps (ingest input)
     exemplars/<stem>.jpg            photo-like exemplars (ingest input)
-    groundtruth.json                what evaluation compares against (see `groundtruth`)
+    groundtruth.json                what evaluation compares against: the format of docs/evaluation.md
+                                    plus the demo's own fields (see `groundtruth`)
     groundtruth/masks/<stem>.png    part-index masks in the exemplars' native frame
     groundtruth/shapes/             held-out shapes seen only in exemplars
     groundtruth/envmaps/            held-out studios used only for exemplars
