@@ -12,7 +12,7 @@ from prefect.artifacts import create_table_artifact
 
 @task(name="run-evaluation")
 def run_evaluation_task(groundtruth: str | None, run: str | None, source: str | None) -> dict[str, Any]:
-    from photoshape_flow.pipeline.eval_tables import headline_rows, stage_rows
+    from photoshape_flow.evaluation.tables import headline_rows, stage_rows
     from photoshape_flow.pipeline.evaluate import metrics_table, run_evaluation
     from photoshape_flow.pipeline.groundtruth_registry import resolve_groundtruth
 

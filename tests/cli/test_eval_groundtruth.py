@@ -25,8 +25,8 @@ from typer.testing import CliRunner
 from photoshape_flow.cli import app
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.pipeline import evaluate as ev
-from photoshape_flow.pipeline.groundtruth_format import read_groundtruth_file
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 

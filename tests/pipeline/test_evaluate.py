@@ -26,9 +26,9 @@ from tests.conftest import ingest_tiny_demo
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline import evaluate as ev
 from photoshape_flow.pipeline.evaluate import Metric
-from photoshape_flow.pipeline.groundtruth_format import TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 

@@ -10,7 +10,7 @@ import sqlalchemy as sa
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.groundtruth_format import GroundTruthFile
+from photoshape_flow.evaluation.groundtruth import GroundTruthFile
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth, resolve_groundtruth
 
 

@@ -26,7 +26,7 @@ def print_rows(title: str, rows: Sequence[dict[str, str]]) -> None:
 
 def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
     """The headline (ours vs each baseline, the shared stages' main figures), then every figure."""
-    from photoshape_flow.pipeline.eval_tables import HEADLINE_TITLE, STAGES_TITLE, headline_rows, stage_rows
+    from photoshape_flow.evaluation.tables import HEADLINE_TITLE, STAGES_TITLE, headline_rows, stage_rows
     from photoshape_flow.pipeline.evaluate import metrics_table
 
     print_rows(f"headline: {HEADLINE_TITLE}", headline_rows(metrics))

@@ -1,6 +1,6 @@
 """The demo's ground truth (groundtruth.json) as typed dataclasses, for the demo's own tools.
 
-The file is the general ground-truth format (docs/evaluation.md, `pipeline.groundtruth_format`),
+The file is the general ground-truth format (docs/evaluation.md, `evaluation.groundtruth`),
 which `photoshape eval` reads like any other; the demo adds top-level blocks and per-entry fields
 that only its benches and experiments use (paths relative to the demo folder):
 
@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from photoshape_flow.pipeline.groundtruth_format import (
+from photoshape_flow.evaluation.groundtruth import (
     FORMAT,
     VERSION,
     PartTruth,
@@ -135,7 +135,7 @@ def _opt(value: Any) -> str | None:
 
 def parse_groundtruth(data: dict[str, Any], root: Path) -> GroundTruth:
     """GroundTruth from the decoded JSON; paths are resolved against `root`. The exemplars are read by
-    the general format's parser (`pipeline.groundtruth_format`), so the demo's file is checked like
+    the general format's parser (`evaluation.groundtruth`), so the demo's file is checked like
     any user's; a demo file with a bad entry is a bug, hence an error here."""
     general = parse_groundtruth_data(data, root)
     if general.problems:

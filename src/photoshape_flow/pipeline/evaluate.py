@@ -1,6 +1,6 @@
 """`photoshape eval`: compare what the pipeline recorded with a ground-truth file.
 
-The file is the format of docs/evaluation.md (`pipeline.groundtruth_format`; the demo writes its own
+The file is the format of docs/evaluation.md (`evaluation.groundtruth`; the demo writes its own
 ground truth in it, so the demo is scored by this same path). Every stage's metrics land in the
 `evaluation` table as (run, stage, method, metric, value, count), tagged with the file's sha256, so
 runs can be compared in SQL. Stages:
@@ -42,7 +42,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
-from photoshape_flow.pipeline.groundtruth_format import ItemRef, TruthEntry, read_groundtruth_file
+from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
 from photoshape_flow.store import BlobStore

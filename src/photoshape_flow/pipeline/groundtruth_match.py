@@ -1,6 +1,6 @@
 """Ground-truth entries matched to what the database holds: exemplar ids, true shapes, parts, materials.
 
-`pipeline.groundtruth_format` checks an entry's shape; this module checks its names. An entry whose
+`evaluation.groundtruth` checks an entry's shape; this module checks its names. An entry whose
 exemplar is not ingested, whose shape is unknown (and not declared ``"in_collection": false``), whose
 materials or substances are unknown, or which has no mask and part names that differ from the true
 shape's (names are then the only way to score a part) gets one message listing every reason and
@@ -24,7 +24,7 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
 from photoshape_flow.demo.groundtruth import source_keys
-from photoshape_flow.pipeline.groundtruth_format import GroundTruthFile, ItemRef, TruthEntry
+from photoshape_flow.evaluation.groundtruth import GroundTruthFile, ItemRef, TruthEntry
 from photoshape_flow.vocab import SUBSTANCES
 
 

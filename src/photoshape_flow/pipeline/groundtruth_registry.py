@@ -17,7 +17,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.base import utcnow
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
-from photoshape_flow.pipeline.groundtruth_format import GroundTruthFile
+from photoshape_flow.evaluation.groundtruth import GroundTruthFile
 
 NO_GROUNDTRUTH = ("no ground truth given, none registered and no demo under the data root: pass one "
                   "(--groundtruth FILE, format in docs/evaluation.md) or run `photoshape demo`")

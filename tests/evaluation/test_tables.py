@@ -1,8 +1,8 @@
-"""`pipeline/eval_tables.py`: the headline `photoshape eval`, `demo` and the evaluate flow show first."""
+"""`evaluation/tables.py`: the headline `photoshape eval`, `demo` and the evaluate flow show first."""
 
 from __future__ import annotations
 
-from photoshape_flow.pipeline.eval_tables import headline_rows, stage_rows
+from photoshape_flow.evaluation.tables import headline_rows, stage_rows
 from photoshape_flow.pipeline.evaluate import Metric
 
 

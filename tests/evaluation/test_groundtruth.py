@@ -1,4 +1,4 @@
-"""`pipeline/groundtruth_format.py`: the documented ground-truth file read into typed records, with
+"""`evaluation/groundtruth.py`: the documented ground-truth file read into typed records, with
 one message per bad entry (skipped) and an error only for a file that is not this format at all."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from photoshape_flow.pipeline.groundtruth_format import (
+from photoshape_flow.evaluation.groundtruth import (
     CameraTruth,
     GroundTruthError,
     ItemRef,
