@@ -449,6 +449,19 @@ def test_a_material_mask_scores_like_the_part_mask_it_summarises(db_url: str, st
         assert ev.evaluate_substances(session, store, matched.truths) == by_part_substances
 
 
+def test_a_mask_not_in_the_photos_frame_skips_its_entry(db_url: str, store: BlobStore, scene: Scene) -> None:
+    """The 12 x 10 mask fits a photo ingested at 12 x 10; against 16 x 10 every crop would be shifted."""
+    for size, problems in (((12, 10), ()), ((16, 10), (
+            f"exemplars[0] (photo): mask {scene.groundtruth.parent / 'masks' / 'photo.png'} is 12x10 but the photo "
+            "is 16x10; skipped",))):
+        with session_scope(db_url) as session:
+            exemplar = session.get(m.Exemplar, scene.exemplars["photo"])
+            exemplar.native_width, exemplar.native_height = size
+        with session_scope(db_url) as session:
+            matched = match_groundtruth(session, read_groundtruth_file(scene.groundtruth))
+        assert matched.problems == problems and len(matched.truths) == 1 - len(problems)
+
+
 # --- re-render error ---------------------------------------------------------------------------------
 
 

@@ -42,6 +42,7 @@ from photoshape_flow.evaluation.groundtruth import (
     PartTruth,
     parse_groundtruth_data,
     read_part_mask,
+    source_keys,
 )
 
 GROUNDTRUTH_FORMAT, GROUNDTRUTH_VERSION = FORMAT, VERSION
@@ -203,13 +204,6 @@ def load_groundtruth(path: Path | str) -> GroundTruth:
 def exemplar_records(groundtruth: Any) -> dict[str, Any]:
     """stem -> exemplar record: the ``exemplars`` of a `GroundTruth`, or a plain mapping itself."""
     return dict(getattr(groundtruth, "exemplars", groundtruth))
-
-
-def source_keys(source_id: str) -> tuple[str, str, str]:
-    """The keys a ground truth may list an ingested exemplar under, most specific first: its
-    source_id, the file name in it, and that name without its extension (the demo's stem)."""
-    name = source_id.rsplit("/", 1)[-1]
-    return source_id, name, name.rsplit(".", 1)[0]
 
 
 def record_for_source(records: Mapping[str, Any], source_id: str) -> Any | None:

@@ -133,6 +133,13 @@ class GroundTruthFile:
     extra: dict[str, Any] = field(default_factory=dict)  # top-level keys outside the format
 
 
+def source_keys(source_id: str) -> tuple[str, str, str]:
+    """The keys a ground truth may list an ingested exemplar under, most specific first: its
+    source_id, the file name in it, and that name without its extension (the demo's stem)."""
+    name = source_id.rsplit("/", 1)[-1]
+    return source_id, name, name.rsplit(".", 1)[0]
+
+
 def read_part_mask(path: Path) -> np.ndarray:
     """A label mask file as stored (8- or 16-bit PNG; values as written, 0 = background)."""
     import cv2

@@ -7,7 +7,7 @@ shape's (names are then the only way to score a part) gets one message listing e
 is left out; the others are scored. With a mask the pixels say which part is which, so a shape
 segmented differently from the photo's labels is fine.
 
-Source ids are matched like `demo.groundtruth.source_keys`: the exact id first, then the file name
+Source ids are matched like `evaluation.groundtruth.source_keys`: the exact id first, then the file name
 and the stem, so a file written for stems keeps working after ids became relative paths.
 """
 
@@ -23,8 +23,14 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
-from photoshape_flow.demo.groundtruth import source_keys
-from photoshape_flow.evaluation.groundtruth import GroundTruthFile, ItemRef, TruthEntry
+from photoshape_flow.evaluation.groundtruth import (
+    GroundTruthFile,
+    ItemRef,
+    MaskTruth,
+    TruthEntry,
+    read_part_mask,
+    source_keys,
+)
 from photoshape_flow.vocab import SUBSTANCES
 
 
@@ -71,6 +77,8 @@ def match_groundtruth(session: Session, gt: GroundTruthFile, source: str | None 
     """Match every entry (of `source` only, when given) to the database; see the module docstring."""
     exemplars = _RefIndex(session.execute(
         sa.select(m.Exemplar.id, m.Exemplar.source, m.Exemplar.source_id).where(m.Exemplar.status == "ok")).all())
+    native = {eid: (w, h) for eid, w, h in session.execute(
+        sa.select(m.Exemplar.id, m.Exemplar.native_width, m.Exemplar.native_height))}
     shapes = _RefIndex(session.execute(
         sa.select(m.Shape.id, m.Shape.source, m.Shape.source_id).where(m.Shape.status == "ok")).all())
     shape_parts: dict[int, set[str]] = defaultdict(set)
@@ -95,8 +103,8 @@ def match_groundtruth(session: Session, gt: GroundTruthFile, source: str | None 
         resolved, shape_reasons = _resolve_shape(entry, shapes, shape_parts)
         reasons += shape_reasons
         reasons += _material_reasons(entry, substances)
-        if entry.mask is not None and not Path(entry.mask.path).is_file():
-            reasons.append(f"mask {entry.mask.path} not found")
+        if entry.mask is not None:
+            reasons += _mask_reasons(entry.mask, native.get(found[0][0]) if len(found) == 1 else None)
         if reasons:
             problems.append(f"{entry.label}: {'; '.join(reasons)}; skipped")
             continue
@@ -126,6 +134,19 @@ def _resolve_shape(entry: TruthEntry, shapes: _RefIndex, shape_parts: dict[int, 
     resolved = dataclasses.replace(entry, shape_ref=ItemRef(shape_source, shape_source_id),
                                    in_collection=True if entry.in_collection is None else entry.in_collection)
     return resolved, reasons
+
+
+def _mask_reasons(mask: MaskTruth, photo_size: tuple[int | None, int | None] | None) -> list[str]:
+    """A mask that is missing, unreadable, or not in the photo's own frame (its size as ingested)."""
+    if not Path(mask.path).is_file():
+        return [f"mask {mask.path} not found"]
+    try:
+        height, width = read_part_mask(mask.path).shape[:2]
+    except FileNotFoundError:
+        return [f"mask {mask.path} is not a readable image"]
+    if photo_size is not None and None not in photo_size and (width, height) != photo_size:
+        return [f"mask {mask.path} is {width}x{height} but the photo is {photo_size[0]}x{photo_size[1]}"]
+    return []
 
 
 def _part_name_reasons(entry: TruthEntry, shape: str, on_shape: set[str]) -> list[str]:
