@@ -121,3 +121,22 @@ def test_the_file_is_hashed_as_read_and_bad_json_is_one_error(tmp_path: Path) ->
         read_groundtruth_file(path)
     with pytest.raises(GroundTruthError, match="cannot read"):
         read_groundtruth_file(tmp_path / "missing.json")
+
+
+def test_json_lines_a_header_then_one_entry_per_line(tmp_path: Path) -> None:
+    """Blank lines are ignored, a line that is not JSON is one skipped entry, messages name lines."""
+    path = tmp_path / "truth.jsonl"
+    lines = [json.dumps({"format": "photoshape-groundtruth", "version": 2, "license": "CC0-1.0"}),
+             json.dumps(entry(source_id="a")), "", "{not json", json.dumps(entry(source_id="b", parts={}))]
+    path.write_text("\n".join(lines) + "\n")
+    gt = read_groundtruth_file(path)
+    assert [e.stem for e in gt.entries] == ["a"] and gt.entries[0].label == "line 2 (photos/a)"
+    assert gt.extra == {"license": "CC0-1.0"}
+    assert gt.problems[0].startswith("line 4: not JSON (") and gt.problems[0].endswith("; skipped")
+    assert gt.problems[1].startswith("line 5 (b): parts is empty")
+    path.write_text("{not a header\n" + lines[1])
+    with pytest.raises(GroundTruthError, match="line 1, the header, is not JSON"):
+        read_groundtruth_file(path)
+    path.write_text(json.dumps({"format": "other", "version": 2}))
+    with pytest.raises(GroundTruthError, match="\"format\" must be"):
+        read_groundtruth_file(path)

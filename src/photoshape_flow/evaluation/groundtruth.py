@@ -2,9 +2,11 @@
 
 One JSON object: ``{"format": "photoshape-groundtruth", "version": 2, "exemplars": [entry, ...]}``;
 any other top-level key (the demo's ``shapes``, ``materials``, ``stamps`` ...) is kept out of the
-evaluation. Each entry names an ingested exemplar by source and source id, its true shape, optionally
-its camera, the true material and substance per part name, and optionally a per-pixel mask (part
-indices or material indices, path relative to the file).
+evaluation. Or JSON Lines (``.jsonl``): that object without ``exemplars`` on the first line, one entry
+per further line, for collections written (or appended to) one photo at a time. Each entry names an
+ingested exemplar by source and source id, its true shape, optionally its camera, the true material
+and substance per part name, and optionally a per-pixel mask (part indices or material indices, path
+relative to the file).
 
 A bad entry (wrong JSON types, no parts, a mask value naming an unlisted part, a duplicate) gives one
 message naming it and is left out, so one typo never costs the whole evaluation; only a file that is
@@ -17,7 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -248,8 +250,12 @@ def parse_entry(data: Any, root: Path, label: str) -> TruthEntry:
     )
 
 
-def parse_groundtruth_data(data: Any, root: Path, *, path: Path | None = None, sha256: str = "") -> GroundTruthFile:
-    """Typed entries and one message per entry left out; raises GroundTruthError for a foreign file."""
+def parse_groundtruth_data(data: Any, root: Path, *, path: Path | None = None, sha256: str = "",
+                           labels: Sequence[str] | None = None, problems: Sequence[str] = ()) -> GroundTruthFile:
+    """Typed entries and one message per entry left out; raises GroundTruthError for a foreign file.
+
+    `labels` name the entries in messages (default ``exemplars[i]``; a JSON Lines file's line
+    numbers); `problems` are those found before parsing (lines that are not JSON)."""
     where = path or root
     if not isinstance(data, Mapping):
         raise GroundTruthError(f"{where}: the ground truth must be a JSON object")
@@ -262,10 +268,10 @@ def parse_groundtruth_data(data: Any, root: Path, *, path: Path | None = None, s
     if not isinstance(raw, list):
         raise GroundTruthError(f"{where}: \"exemplars\" must be a list of entries")
     entries: list[TruthEntry] = []
-    problems: list[str] = []
+    problems = list(problems)
     seen: dict[ItemRef, str] = {}
     for i, item in enumerate(raw):
-        label = f"exemplars[{i}]"
+        label = labels[i] if labels is not None else f"exemplars[{i}]"
         try:
             entry = parse_entry(item, root, label)
         except EntryError as exc:
@@ -282,15 +288,47 @@ def parse_groundtruth_data(data: Any, root: Path, *, path: Path | None = None, s
                            problems=tuple(problems), extra=extra)
 
 
+def _json_lines(text: str, where: Path) -> tuple[dict[str, Any], list[str], list[str]]:
+    """A JSON Lines file as the object it stands for: the first non-empty line is the header
+    (``format``, ``version``, any other top-level key), each further line one entry. Returns (data,
+    the entries' labels "line N", one problem per line that is not JSON)."""
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.strip()]
+    if not lines:
+        raise GroundTruthError(f"{where}: empty")
+    try:
+        header = json.loads(lines[0][1])
+    except json.JSONDecodeError as exc:
+        raise GroundTruthError(f"{where}: line {lines[0][0]}, the header, is not JSON ({exc.msg})") from exc
+    if not isinstance(header, Mapping):
+        raise GroundTruthError(f"{where}: line {lines[0][0]} must be the header object (format, version)")
+    entries: list[Any] = []
+    labels: list[str] = []
+    problems: list[str] = []
+    for n, line in lines[1:]:
+        try:
+            entries.append(json.loads(line))
+        except json.JSONDecodeError as exc:
+            problems.append(f"line {n}: not JSON ({exc.msg}); skipped")
+            continue
+        labels.append(f"line {n}")
+    return {**header, "exemplars": entries}, labels, problems
+
+
 def read_groundtruth_file(path: Path | str) -> GroundTruthFile:
-    """Read and parse a ground-truth file; its sha256 tags the evaluation it feeds."""
+    """Read and parse a ground-truth file (JSON, or JSON Lines when it ends in .jsonl); its sha256 tags
+    the evaluation it feeds."""
     path = Path(path)
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise GroundTruthError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    sha256 = hashlib.sha256(raw).hexdigest()
     try:
+        if path.suffix.lower() == ".jsonl":
+            data, labels, problems = _json_lines(raw.decode("utf-8"), path)
+            return parse_groundtruth_data(data, path.parent, path=path, sha256=sha256, labels=labels,
+                                          problems=problems)
         data = json.loads(raw)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise GroundTruthError(f"{path}: not JSON ({exc})") from exc
-    return parse_groundtruth_data(data, path.parent, path=path, sha256=hashlib.sha256(raw).hexdigest())
+    return parse_groundtruth_data(data, path.parent, path=path, sha256=sha256)
