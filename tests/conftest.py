@@ -183,3 +183,13 @@ def data_root_with_inbox(data_root: Path, demo: Path) -> Path:
     for name in ("envmaps", "materials", "shapes", "exemplars"):
         (inbox / name).symlink_to(demo / name)
     return data_root
+
+
+def ingest_tiny_demo(demo: Path, exemplar_size: int = 128) -> None:
+    """The demo's exemplars, shapes and materials under the source `photoshape demo` gives them
+    (demo-tiny), so its ground truth matches; into the database the settings point at."""
+    from photoshape_flow.pipeline.ingest import ingest_exemplars, ingest_materials, ingest_shapes
+
+    assert ingest_exemplars([demo / "exemplars"], source="demo-tiny", size=exemplar_size).added
+    assert ingest_shapes([demo / "shapes"], source="demo-tiny", isolate=False).added
+    assert ingest_materials([demo / "materials"], source="demo-tiny", previews=False).added

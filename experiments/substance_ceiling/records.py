@@ -38,9 +38,11 @@ from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.demo import load_groundtruth, newest_groundtruth
+from photoshape_flow.demo import newest_groundtruth
+from photoshape_flow.evaluation.groundtruth import GroundTruthFile, read_groundtruth_file
 from photoshape_flow.pipeline.calibration import COLOR_SIGMA_RENDERS
 from photoshape_flow.pipeline.evaluate import majority_label, merge_labels, truth_labels
+from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.training import load_material_classifier, training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
@@ -50,14 +52,13 @@ from ..common import load_evidence, results_dir
 # -- ground truth as `photoshape eval` reads it (the same rules as pipeline/evaluate.py) ----------------
 
 
-def exemplar_truths(session: Session, gt: Any) -> dict[int, Any]:
-    """exemplar id -> its ground-truth record (matched by file stem = source_id)."""
-    out = {}
-    for exemplar in session.execute(sa.select(m.Exemplar).where(m.Exemplar.status == "ok")).scalars():
-        stem = Path(exemplar.source_id).stem
-        if stem in gt.exemplars:
-            out[exemplar.id] = gt.exemplars[stem]
-    return out
+def exemplar_truths(session: Session, gt: GroundTruthFile) -> dict[int, Any]:
+    """exemplar id -> its ground-truth entry, matched exactly as `photoshape eval` matches them (entries
+    with a mask only: the records are per aligned pixel)."""
+    matched = match_groundtruth(session, gt)
+    for problem in matched.problems:
+        print(f"skipped {problem}", file=sys.stderr)
+    return {eid: entry for eid, entry in matched.truths.items() if entry.mask is not None}
 
 
 def aligned_part_map(store: BlobStore, alignment: m.Alignment, size: int) -> np.ndarray:
@@ -83,7 +84,7 @@ class ExemplarPair:
     parts: list[m.Part]
 
 
-def exemplar_pairs(session: Session, store: BlobStore, gt: Any) -> Iterator[ExemplarPair]:
+def exemplar_pairs(session: Session, store: BlobStore, gt: GroundTruthFile) -> Iterator[ExemplarPair]:
     """Every aligned (flow-crf), non-excluded pair whose exemplar has ground truth, in pair order."""
     truths = exemplar_truths(session, gt)
     rows = session.execute(
@@ -137,7 +138,7 @@ def main() -> None:
     gt_path = args.groundtruth or newest_groundtruth(settings.data_root)
     if gt_path is None:
         sys.exit(f"{settings.data_root}: no demo ground truth; run `photoshape demo` or pass groundtruth.json")
-    gt = load_groundtruth(gt_path)
+    gt = read_groundtruth_file(gt_path)
     store = BlobStore(settings.blob_root)
     row, clf = load_material_classifier(settings=settings)
     index = {mid: i for i, mid in enumerate(clf.materials)}

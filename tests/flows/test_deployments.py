@@ -82,6 +82,18 @@ def test_flow_parameters_are_typed_for_ui_forms() -> None:
     assert with_profile >= len(STAGES) + 2
 
 
+def test_every_deployment_quick_runs_without_parameters() -> None:
+    """Prefect's "Quick run" sends only the declared parameters: a flow parameter without a default
+    that the declaration does not fill fails the run before it starts (the evaluate deployment did)."""
+    from photoshape_flow.flows.deployments import load_flow
+    from prefect.utilities.callables import parameter_schema
+
+    for spec in load_declarations():
+        schema = parameter_schema(load_flow(spec["entrypoint"]).fn).model_dump()
+        unfilled = set(schema.get("required") or ()) - set(spec.get("parameters") or {})
+        assert not unfilled, (spec["name"], unfilled)
+
+
 @pytest.mark.slow
 def test_installed_wheel_carries_flows_migrations_and_prefect_yaml(tmp_path: Path) -> None:
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",

@@ -10,6 +10,7 @@ stage's expected value is derived in the comment next to its assertion.
 from __future__ import annotations
 
 import datetime as dt
+import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -21,12 +22,14 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
+from tests.conftest import ingest_tiny_demo
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.demo import load_groundtruth
+from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline import evaluate as ev
 from photoshape_flow.pipeline.evaluate import Metric
+from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 
 # ground-truth parts of the photos: character -> (part name, material, substance)
@@ -97,22 +100,27 @@ def native_mask(rows: tuple[str, ...]) -> np.ndarray:
 
 def write_groundtruth(root: Path, photos: dict[str, tuple[str, ...]], *, shape: str = "chair",
                       in_collection: dict[str, bool] | None = None) -> Path:
-    """groundtruth.json (schema version 1) and the photos' part masks under `root`."""
+    """groundtruth.json (docs/evaluation.md, version 2) and the photos' part masks under `root`."""
     (root / "masks").mkdir(parents=True, exist_ok=True)
-    exemplars = {}
+    exemplars = []
     for stem, rows in photos.items():
         cv2.imwrite(str(root / "masks" / f"{stem}.png"), native_mask(rows))
-        exemplars[stem] = {
-            "image": f"exemplars/{stem}.jpg", "mask": f"masks/{stem}.png", "size": 12, "shape": shape,
-            "in_collection": (in_collection or {}).get(stem, True), "similar_to": None,
+        exemplars.append({
+            "source_id": stem, "shape": {"source_id": shape},
+            "in_collection": (in_collection or {}).get(stem, True),
             "camera": {"azimuth": 0.0, "elevation": 0.2, "distance": 2.0, "fov": 50.0},
-            "part_names": {str(MASK_VALUE[c]): name for c, (name, _, _) in GT_PARTS.items()},
             "parts": {name: {"material": mat, "substance": sub} for name, mat, sub in GT_PARTS.values()},
-        }
+            "mask": {"path": f"masks/{stem}.png", "kind": "part",
+                     "values": {str(MASK_VALUE[c]): name for c, (name, _, _) in GT_PARTS.items()}},
+        })
     path = root / "groundtruth.json"
-    path.write_text(json.dumps({"version": 1, "size": "test", "seed": 0, "generator": "test", "shapes": {},
-                                "materials": {}, "exemplars": exemplars}))
+    path.write_text(json.dumps({"format": "photoshape-groundtruth", "version": 2, "exemplars": exemplars}))
     return path
+
+
+def entry_of(path: Path, stem: str) -> TruthEntry:
+    """The parsed entry of one photo (no database)."""
+    return next(e for e in read_groundtruth_file(path).entries if e.stem == stem)
 
 
 @dataclass
@@ -190,9 +198,9 @@ def add_assignments(url: str, scene: Scene, stem: str, method_key: str,
                     method_key=method_key, rank=rank, material_id=None if name is None else scene.materials[name]))
 
 
-def truths_of(url: str, scene: Scene) -> dict[int, Any]:
+def truths_of(url: str, scene: Scene) -> dict[int, TruthEntry]:
     with session_scope(url) as session:
-        return ev._exemplar_truths(session, load_groundtruth(scene.groundtruth), None)
+        return match_groundtruth(session, read_groundtruth_file(scene.groundtruth)).truths
 
 
 def by_name(metrics: list[Metric]) -> dict[tuple[str, str], tuple[float | None, int | None]]:
@@ -223,21 +231,21 @@ def scene(db_url: str, store: BlobStore, tmp_path: Path) -> Scene:
 
 def test_truth_labels_apply_the_crop_and_the_name_table(tmp_path: Path) -> None:
     """The demo's mask values (7, 5, 9, 3) and its native frame must not leak into the labels."""
-    gt = load_groundtruth(write_groundtruth(tmp_path, {"photo": TRUTH}))
-    labels, mats, subs = ev.truth_labels(gt.exemplars["photo"], m.Exemplar(size=8, meta={"crop": dict(CROP)}))
+    truth = entry_of(write_groundtruth(tmp_path, {"photo": TRUTH}), "photo")
+    labels, mats, subs = ev.truth_labels(truth, m.Exemplar(size=8, meta={"crop": dict(CROP)}))
     np.testing.assert_array_equal(labels, truth_grid(TRUTH))
     # sorted names: back, leg_l, leg_r, seat
     assert mats == ["blue_leather", "walnut", "walnut", "red_leather"]
     assert subs == ["leather", "wood", "wood", "leather"]
     # a stored exemplar of 16 px: every label doubled (nearest neighbour never invents a label)
-    big, _, _ = ev.truth_labels(gt.exemplars["photo"], m.Exemplar(size=16, meta={"crop": dict(CROP)}))
+    big, _, _ = ev.truth_labels(truth, m.Exemplar(size=16, meta={"crop": dict(CROP)}))
     np.testing.assert_array_equal(big, np.kron(truth_grid(TRUTH), np.ones((2, 2), np.int32)))
 
 
 def test_truth_labels_without_a_crop_use_the_whole_native_frame(tmp_path: Path) -> None:
     """No crop recorded: the square of the native frame's longer side, padded with background."""
-    gt = load_groundtruth(write_groundtruth(tmp_path, {"photo": TRUTH}))
-    labels, _, _ = ev.truth_labels(gt.exemplars["photo"], m.Exemplar(size=12, meta={}))
+    truth = entry_of(write_groundtruth(tmp_path, {"photo": TRUTH}), "photo")
+    labels, _, _ = ev.truth_labels(truth, m.Exemplar(size=12, meta={}))
     assert labels.shape == (12, 12)
     assert (labels[10:] == 0).all()  # rows 10, 11 lie below the 10-row native mask
     seat = sorted(n for n, _, _ in GT_PARTS.values()).index("seat") + 1
@@ -355,14 +363,103 @@ def test_inference_figures_are_means_over_parts_of_all_pairs(db_url: str, store:
 
 
 def test_exemplars_outside_the_source_or_not_ok_have_no_truth(db_url: str, store: BlobStore, scene: Scene) -> None:
-    """Exemplars match the ground truth by file stem, within the asked source, when ingested fine."""
-    gt = load_groundtruth(scene.groundtruth)
+    """Exemplars match the ground truth by source id, within the asked source, when ingested fine."""
+    gt = read_groundtruth_file(scene.groundtruth)
     with session_scope(db_url) as session:
         session.add(m.Exemplar(source="demo", source_id="not_in_groundtruth"))
-        assert set(ev._exemplar_truths(session, gt, "demo")) == {scene.exemplars["photo"]}
-        assert ev._exemplar_truths(session, gt, "elsewhere") == {}
+        assert set(match_groundtruth(session, gt, "demo").truths) == {scene.exemplars["photo"]}
+        assert match_groundtruth(session, gt, "elsewhere").truths == {}
         session.get(m.Exemplar, scene.exemplars["photo"]).status = "rejected"
-        assert ev._exemplar_truths(session, gt, None) == {}
+        assert match_groundtruth(session, gt, None).truths == {}
+
+
+# --- entries without a mask, material masks --------------------------------------------------------
+
+
+def rewrite_entries(path: Path, edit: Any) -> None:
+    """Apply `edit(entries)` to the ground-truth file in place."""
+    data = json.loads(path.read_text())
+    edit(data["exemplars"])
+    path.write_text(json.dumps(data))
+
+
+def test_without_a_mask_parts_are_scored_by_name_on_the_true_shape_only(
+    db_url: str, store: BlobStore, tmp_path: Path
+) -> None:
+    """No mask: each of the chair's six parts is scored against the entry's part of the same name (all
+    of them: visibility is unknown), and only on pairs of the chair. Ours: seat, legs, hidden and
+    apron right, back only 2nd (top-5), cushion wrong -> top-1 4/6, top-5 5/6; the first choice's
+    substance: back (walnut: wood for leather) and cushion (steel: metal for fabric) wrong -> 4/6.
+    'other' shows the chair too but its pair is with a stool: not scored (it would add a 0)."""
+    made = build_scene(db_url, store, tmp_path / "demo", {"photo": TRUTH, "other": TRUTH}, {"photo": PART_MAP})
+    named = {"seat": "red_leather", "back": "blue_leather", "legs": "walnut", "cushion": "grey_fabric",
+             "hidden": "steel", "apron": "oak"}
+
+    def drop_masks(entries: list[dict[str, Any]]) -> None:
+        for e in entries:
+            del e["mask"]
+            e["parts"] = {n: {"material": mat, "substance": MATERIALS[mat]} for n, mat in named.items()}
+
+    rewrite_entries(made.groundtruth, drop_masks)
+    with session_scope(db_url) as session:
+        stool = m.Shape(source="t", source_id="stool")
+        session.add(stool)
+        session.flush()
+        session.add(m.Part(shape_id=stool.id, index=1, name="seat"))
+        made.pairs["other"] = add_pair(session, store, stool.id, made.exemplars["other"], part_grid(PART_MAP))
+    add_assignments(db_url, made, "photo", "classifier:1", {
+        1: ["red_leather"], 2: ["walnut", "blue_leather"], 3: ["walnut"], 4: ["steel"], 5: ["steel"], 6: ["oak"]})
+    with session_scope(db_url) as session:
+        session.add(m.Assignment(pair_id=made.pairs["other"], part_id=session.execute(
+            sa.select(m.Part.id).where(m.Part.shape_id == stool.id)).scalar_one(), method="classifier",
+            method_key="classifier:1", rank=1, material_id=made.materials["steel"]))
+    truths = truths_of(db_url, made)
+    assert len(truths) == 2
+    with session_scope(db_url) as session:
+        metrics = by_name(ev.evaluate_inference(session, store, truths, rerender_max_pairs=0))
+    assert metrics[("classifier:1", "material_top1")] == (pytest.approx(4 / 6), 6)
+    assert metrics[("classifier:1", "material_top5")] == (pytest.approx(5 / 6), 6)
+    assert metrics[("classifier:1", "substance_accuracy")] == (pytest.approx(4 / 6), 6)
+
+
+def test_a_material_mask_scores_like_the_part_mask_it_summarises(db_url: str, store: BlobStore, scene: Scene) -> None:
+    """The main photo's parts relabelled by material (seat red_leather, back blue_leather, both legs
+    walnut) must give every figure the part mask gives: scoring already merges parts of one material.
+    Substances come from the material table; an unknown material in a mask skips its entry."""
+    with session_scope(db_url) as session:
+        by_part = by_name(ev.evaluate_inference(session, store, truths_of(db_url, scene), rerender_max_pairs=0))
+        by_part_substances = ev.evaluate_substances(session, store, truths_of(db_url, scene))
+
+    def to_materials(entries: list[dict[str, Any]]) -> None:
+        (e,) = entries
+        names = {name: mat for name, mat, _ in GT_PARTS.values()}
+        e["mask"] = {"path": e["mask"]["path"], "kind": "material",
+                     "values": {v: names[part] for v, part in e["mask"]["values"].items()}}
+        entries.append(dict(e, source_id="photo2", mask=dict(e["mask"], values={"1": "nope"})))
+
+    rewrite_entries(scene.groundtruth, to_materials)
+    with session_scope(db_url) as session:
+        matched = match_groundtruth(session, read_groundtruth_file(scene.groundtruth))
+        (truth,) = matched.truths.values()
+        assert truth.material_substances == {"red_leather": "leather", "blue_leather": "leather", "walnut": "wood"}
+        assert truth.part_names == {}  # no part-label accuracy from a material mask
+        assert matched.problems == ("exemplars[1] (photo2): exemplar photo2 is not ingested (or not ok); "
+                                    "unknown materials: nope; skipped",)  # every reason, one line
+        assert by_name(ev.evaluate_inference(session, store, matched.truths, rerender_max_pairs=0)) == by_part
+        assert ev.evaluate_substances(session, store, matched.truths) == by_part_substances
+
+
+def test_a_mask_not_in_the_photos_frame_skips_its_entry(db_url: str, store: BlobStore, scene: Scene) -> None:
+    """The 12 x 10 mask fits a photo ingested at 12 x 10; against 16 x 10 every crop would be shifted."""
+    for size, problems in (((12, 10), ()), ((16, 10), (
+            f"exemplars[0] (photo): mask {scene.groundtruth.parent / 'masks' / 'photo.png'} is 12x10 but the photo "
+            "is 16x10; skipped",))):
+        with session_scope(db_url) as session:
+            exemplar = session.get(m.Exemplar, scene.exemplars["photo"])
+            exemplar.native_width, exemplar.native_height = size
+        with session_scope(db_url) as session:
+            matched = match_groundtruth(session, read_groundtruth_file(scene.groundtruth))
+        assert matched.problems == problems and len(matched.truths) == 1 - len(problems)
 
 
 # --- re-render error ---------------------------------------------------------------------------------
@@ -541,11 +638,16 @@ def test_run_evaluation_stores_every_figure_once(db_url: str, store: BlobStore, 
     name, metrics = ev.run_evaluation(scene.groundtruth, "t1", stages=stages, rerender_max_pairs=0)
     assert name == "t1" and len(metrics) == 1 + 1 + 8
     rows = stored(db_url)
-    params = {"groundtruth": str(scene.groundtruth), "exemplars": 1}
+    params = {"groundtruth": str(scene.groundtruth), "exemplars": 1, "skipped": 0}
     assert rows[("t1", "substances", "substance-network", "part_substance_accuracy")] == (0.75, 4, params)
     assert rows[("t1", "inference", "classifier:1", "material_top5")] == (0.75, 4, params)
     assert rows[("t1", "training", "material:r34", "val_top1")] == (0.5, None, params)
     assert len(rows) == len(metrics)
+    sha = hashlib.sha256(scene.groundtruth.read_bytes()).hexdigest()
+    with session_scope(db_url) as session:  # every figure tagged with the file's hash; the file registered
+        assert set(session.execute(sa.select(m.Evaluation.groundtruth_sha256)).scalars()) == {sha}
+        registered = session.execute(sa.select(m.GroundTruthFileRow)).scalar_one()
+        assert (registered.path, registered.sha256, registered.entries) == (str(scene.groundtruth), sha, 1)
     ev.run_evaluation(scene.groundtruth, "t1", stages=stages, rerender_max_pairs=0)
     assert len(stored(db_url)) == len(metrics)
     default, _ = ev.run_evaluation(scene.groundtruth, stages=["training"])
@@ -610,16 +712,15 @@ def test_an_oracle_scores_one_on_the_tiny_demo(tiny_demo: Path, db_url: str, sto
     scored part per visible ground-truth part (and the ground truth's foreground must agree with the
     stored exemplar's mask: the crop is applied the way ingest applied it)."""
     from photoshape_flow.align.partmap import exemplar_at
-    from photoshape_flow.pipeline.ingest import ingest_exemplars
 
-    assert ingest_exemplars([tiny_demo / "exemplars"], source="demo-tiny", size=128).added
-    gt = load_groundtruth(tiny_demo / "groundtruth.json")
+    ingest_tiny_demo(tiny_demo, 128)
+    gt = read_groundtruth_file(tiny_demo / "groundtruth.json")
     visible = 0
     with session_scope(db_url) as session:
-        truths = ev._exemplar_truths(session, gt, "demo-tiny")
-        assert len(truths) == len(gt.exemplars)
-        materials: dict[str, int] = {}
-        for exemplar_id, truth in truths.items():
+        matched = match_groundtruth(session, gt, "demo-tiny")
+        assert matched.problems == () and len(matched.truths) == len(gt.entries)  # the demo's file is clean
+        materials = dict(session.execute(sa.select(m.Material.name, m.Material.id)).all())
+        for exemplar_id, truth in matched.truths.items():
             exemplar = session.get(m.Exemplar, exemplar_id)
             labels, mats, subs = ev.truth_labels(truth, exemplar)
             _, fg = exemplar_at(store.load_image(exemplar.image_blob), store.load_image(exemplar.mask_blob),
@@ -637,11 +738,6 @@ def test_an_oracle_scores_one_on_the_tiny_demo(tiny_demo: Path, db_url: str, sto
                 labels.astype(np.uint8))))
             for index in map(int, np.unique(labels[labels > 0])):
                 name, substance = mats[index - 1], subs[index - 1]
-                if name not in materials:
-                    material = m.Material(name=name, substance=substance)
-                    session.add(material)
-                    session.flush()
-                    materials[name] = material.id
                 part = m.Part(shape_id=shape.id, index=index, name=f"part{index}")
                 session.add(part)
                 session.flush()
@@ -653,7 +749,7 @@ def test_an_oracle_scores_one_on_the_tiny_demo(tiny_demo: Path, db_url: str, sto
                 visible += 1
     _, metrics = ev.run_evaluation(tiny_demo / "groundtruth.json", "oracle", stages=["substances", "inference"],
                                    exemplar_source="demo-tiny", rerender_max_pairs=0)
-    assert visible >= len(gt.exemplars)
+    assert visible >= len(gt.entries)
     assert by_name(metrics) == {
         ("substance-network", "part_substance_accuracy"): (1.0, visible),
         ("oracle", "material_top1"): (1.0, visible),
@@ -672,18 +768,17 @@ def test_rerender_error_with_mitsuba_prefers_the_true_materials(tiny_demo: Path,
     than with a material of another substance on every part (measured RMSE 0.11 against 0.20; SSIM
     0.81 against 0.67); the photo's envmap and degradations are not the studio's, so never zero."""
     pytest.importorskip("mitsuba")
-    from photoshape_flow.pipeline.ingest import ingest_envmaps, ingest_exemplars, ingest_materials, ingest_shapes
+    from photoshape_flow.pipeline.ingest import ingest_envmaps
 
-    ingest_exemplars([tiny_demo / "exemplars"], source="demo-tiny", size=64)
-    ingest_shapes([tiny_demo / "shapes"], isolate=False)
-    ingest_materials([tiny_demo / "materials"], previews=False)
+    ingest_tiny_demo(tiny_demo, 64)
     ingest_envmaps([sorted((tiny_demo / "envmaps").glob("studio*"))[0]], isolate=False)
-    gt = load_groundtruth(tiny_demo / "groundtruth.json")
+    gt = read_groundtruth_file(tiny_demo / "groundtruth.json")
     pairs = 0
     with session_scope(db_url) as session:
         shapes = {s.source_id: s for s in session.execute(sa.select(m.Shape)).scalars()}
         materials = {x.name: x for x in session.execute(sa.select(m.Material)).scalars()}
-        for exemplar_id, truth in ev._exemplar_truths(session, gt, "demo-tiny").items():
+        truths = match_groundtruth(session, gt, "demo-tiny").truths
+        for exemplar_id, truth in truths.items():
             if not truth.in_collection:
                 continue
             shape, camera = shapes[truth.shape], truth.camera
@@ -705,7 +800,7 @@ def test_rerender_error_with_mitsuba_prefers_the_true_materials(tiny_demo: Path,
             pairs += 1
     assert pairs >= 2
     with session_scope(db_url) as session:
-        metrics = by_name(ev.evaluate_inference(session, store, ev._exemplar_truths(session, gt, "demo-tiny"),
+        metrics = by_name(ev.evaluate_inference(session, store, truths,
                                                 rerender_size=64, rerender_spp=4))
     (true_rmse, n), (other_rmse, _) = metrics[("true", "rerender_rmse")], metrics[("other", "rerender_rmse")]
     assert n == pairs

@@ -26,7 +26,7 @@ def demo(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log each step."),
 ) -> None:
     """Generate procedural shapes, SVBRDFs, studio envmaps and photo-like exemplars, then run every stage."""
-    from photoshape_flow.cli.eval_cmd import print_metrics
+    from photoshape_flow.cli.eval_cmd import print_metrics, print_problem
     from photoshape_flow.cli.run_cmd import print_reports, run_reporting_blocked
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import migrate
@@ -46,8 +46,9 @@ def demo(
         fail(f"{shown_database_url()}: cannot migrate ({exc})")
     out_dir = settings.data_root / "demo" / size.value
     console.print(f"generating the {size.value} demo collections in {out_dir} ...", highlight=False)
-    manifest = generate_demo(out_dir, size.value, seed=settings.seed if seed is None else seed)
     source = f"demo-{size.value}"
+    manifest = generate_demo(out_dir, size.value, seed=settings.seed if seed is None else seed,
+                             source=source)
     request = IngestRequest(
         roots={name: [manifest.root / name] for name in COLLECTIONS}, source=source, license="CC0-1.0",
         attribution=f"photoshape_flow demo generator (procedural, seed {manifest.seed})",
@@ -68,7 +69,7 @@ def demo(
         from photoshape_flow.pipeline.evaluate import run_evaluation
 
         run_name, metrics = run_evaluation(manifest.groundtruth, f"{source}-{time.strftime('%Y%m%d-%H%M%S')}",
-                                           exemplar_source=source)
+                                           exemplar_source=source, on_problem=print_problem)
         print_metrics(metrics)
         console.print(f"evaluation stored as run [bold]{run_name}[/] (table `evaluation`)")
     elapsed = time.perf_counter() - started

@@ -350,7 +350,28 @@ class Evaluation(Base):
     value: Mapped[float | None]
     count: Mapped[int | None]
     params: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    groundtruth_sha256: Mapped[str | None] = mapped_column(
+        sa.String(64), index=True, comment="sha256 of the ground-truth file scored against (groundtruth_file)")
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow, server_default=sa.func.now())
+
+
+class GroundTruthFileRow(Base):
+    """A ground-truth file `photoshape eval` scored against; the newest used is the default next time.
+
+    Keyed by the file's absolute path: an edited file keeps its row and gets its new sha256, while
+    the evaluation rows keep the hash they were computed with.
+    """
+
+    __tablename__ = "groundtruth_file"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    path: Mapped[str] = mapped_column(sa.String(1024), unique=True)
+    sha256: Mapped[str] = mapped_column(sa.String(64), index=True)
+    version: Mapped[int]
+    entries: Mapped[int] = mapped_column(default=0, comment="entries matched to ingested exemplars")
+    skipped: Mapped[int] = mapped_column(default=0, comment="entries left out (bad or unknown names)")
+    registered_at: Mapped[dt.datetime] = mapped_column(default=utcnow, server_default=sa.func.now())
+    used_at: Mapped[dt.datetime] = mapped_column(default=utcnow, server_default=sa.func.now(), index=True)
 
 
 class Grade(TimestampMixin, Base):
@@ -425,5 +446,6 @@ class PipelineRun(Base):
 
 ALL_TABLES: tuple[type[Base], ...] = (
     Shape, Part, Exemplar, Material, Envmap, ViewpointSet, ViewFeature, ExemplarFeature, ExemplarMatch,
-    Pair, Alignment, PartSubstance, Rendering, Classifier, Assignment, Evaluation, Grade, WorkClaim, PipelineRun,
+    Pair, Alignment, PartSubstance, Rendering, Classifier, Assignment, Evaluation, GroundTruthFileRow, Grade,
+    WorkClaim, PipelineRun,
 )

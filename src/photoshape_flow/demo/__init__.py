@@ -1,8 +1,9 @@
 """Built-in demo collections with ground truth: procedural seating, SVBRDFs, studios and exemplars.
 
 `generate_demo(out_dir, size, seed)` writes a complete input collection (shapes, materials,
-envmaps, photo-like exemplars) plus `groundtruth.json`; `load_groundtruth(path)` reads it back as
-typed dataclasses for evaluation. Pure science package: no database, no Prefect.
+envmaps, photo-like exemplars) plus `groundtruth.json` in the ground-truth format that `photoshape
+eval` reads (docs/evaluation.md); `load_groundtruth(path)` reads it back with the demo's own fields
+as typed dataclasses for the benches and experiments. Pure science package: no database, no Prefect.
 """
 
 from photoshape_flow.demo.generate import SIZES, DemoManifest, SizePreset, generate_demo

@@ -5,7 +5,8 @@ Writes <out_dir>/
     materials/<name>/               SVBRDF folders with material.json (ingest input)
     envmaps/<name>.hdr              studio environment maps (ingest input)
     exemplars/<stem>.jpg            photo-like exemplars (ingest input)
-    groundtruth.json                what evaluation compares against (see `groundtruth`)
+    groundtruth.json                what evaluation compares against: the format of docs/evaluation.md
+                                    plus the demo's own fields (see `groundtruth`)
     groundtruth/masks/<stem>.png    part-index masks in the exemplars' native frame
     groundtruth/shapes/             held-out shapes seen only in exemplars
     groundtruth/envmaps/            held-out studios used only for exemplars
@@ -40,7 +41,7 @@ from photoshape_flow.demo.exemplars import (
 from photoshape_flow.demo.furniture import generate_furniture
 from photoshape_flow.demo.furniture.design import KIND_WEIGHTS, KINDS, perturb_design
 from photoshape_flow.demo.furniture.model import Furniture
-from photoshape_flow.demo.groundtruth import GROUNDTRUTH_VERSION
+from photoshape_flow.demo.groundtruth import GROUNDTRUTH_FORMAT, GROUNDTRUTH_VERSION
 from photoshape_flow.demo.materials import MAP_CHANNELS, MaterialRecipe, select_recipes, write_material
 from photoshape_flow.demo.obj import mtl_text, obj_text
 from photoshape_flow.demo.seeding import child_rng
@@ -268,6 +269,15 @@ def render_exemplar(
 # -- entry point ----------------------------------------------------------------------------------
 
 
+def _previous_exemplars(previous_gt: Any) -> dict[str, Any]:
+    """stem -> the exemplar entry of the file being replaced (a list since version 2, a dict before), so
+    an unchanged exemplar is not rendered again."""
+    entries = previous_gt.get("exemplars", {}) if isinstance(previous_gt, dict) else {}
+    if isinstance(entries, dict):
+        return entries
+    return {e["source_id"]: e for e in entries if isinstance(e, dict) and isinstance(e.get("source_id"), str)}
+
+
 def generate_demo(
     out_dir: Path,
     size: DemoSize = "tiny",
@@ -275,12 +285,16 @@ def generate_demo(
     *,
     renderer=None,
     preset: SizePreset | None = None,
+    source: str | None = None,
 ) -> DemoManifest:
     """Generate (or bring up to date) the demo collection of `size` in `out_dir`; see module docstring.
 
     `renderer`: a `photoshape_flow.render.Renderer` to reuse (one is created when exemplars need
     rendering and none is given). `preset`: custom counts instead of SIZES[size] (tests, experiments).
+    `source`: the ingest source the ground truth names the exemplars and shapes by (default
+    ``demo-<size>``, what `photoshape demo` ingests them as).
     """
+    source = source or f"demo-{size}"
     if size not in SIZES:
         raise ValueError(f"unknown demo size {size!r}; expected one of {sorted(SIZES)}")
     preset = preset or SIZES[size]
@@ -348,11 +362,11 @@ def generate_demo(
     timings["envmaps"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    previous: dict[str, Any] = previous_gt.get("exemplars", {}) if isinstance(previous_gt, dict) else {}
+    previous = _previous_exemplars(previous_gt)
     furniture_by_id = {f.source_id: f for f in collection} | {f.source_id: f for f, _ in heldout}
     recipe_by_name = {r.name: r for r in recipes}
     plans = plan_exemplars(seed, preset, collection, heldout, recipes, held_studios)
-    exemplars_json: dict[str, Any] = {}
+    exemplars_json: list[dict[str, Any]] = []
     exemplar_paths = []
     rendered = 0
     for plan in plans:
@@ -395,26 +409,29 @@ def generate_demo(
             rendered += 1
             log.info("demo exemplar %s: %s (%d parts visible)", plan.stem, plan.shape_id, len(visible))
         exemplar_paths.append(root / image_rel)
-        exemplars_json[plan.stem] = {
-            "image": image_rel,
-            "mask": mask_rel,
-            "size": plan.size,
-            "shape": plan.shape_id,
+        exemplars_json.append({  # the ground-truth format's fields (docs/evaluation.md), then the demo's
+            "source": source,
+            "source_id": plan.stem,
+            "shape": {"source": source, "source_id": plan.shape_id},
             "in_collection": plan.in_collection,
-            "similar_to": plan.similar_to,
             "camera": plan.camera,
-            "part_names": {str(i): p.name for i, p in enumerate(furniture.parts, start=1)},
             "parts": {
                 name: {"material": plan.materials[name], "substance": plan.substances[name]} for name in plan.materials
             },
+            "mask": {"path": mask_rel, "kind": "part",
+                     "values": {str(i): p.name for i, p in enumerate(furniture.parts, start=1)}},
+            "image": image_rel,
+            "size": plan.size,
+            "similar_to": plan.similar_to,
             "visible_parts": visible,
             "envmap": plan.envmap,
             "degradation": plan.degradation,
             "spec_hash": spec_hash,
-        }
+        })
     timings["exemplars"] = time.perf_counter() - t
 
     groundtruth = {
+        "format": GROUNDTRUTH_FORMAT,
         "version": GROUNDTRUTH_VERSION,
         "size": size,
         "seed": seed,

@@ -1,21 +1,24 @@
-"""The demo's ground truth (groundtruth.json) as typed dataclasses, for evaluation.
+"""The demo's ground truth (groundtruth.json) as typed dataclasses, for the demo's own tools.
 
-Schema (version 1), paths relative to the demo folder:
+The file is the general ground-truth format (docs/evaluation.md, `evaluation.groundtruth`),
+which `photoshape eval` reads like any other; the demo adds top-level blocks and per-entry fields
+that only its benches and experiments use (paths relative to the demo folder):
 
-    {"version": 1, "size": "small", "seed": 0, "generator": "photoshape_flow demo <GENERATOR_VERSION>",
+    {"format": "photoshape-groundtruth", "version": 2, "size": "small", "seed": 0,
+     "generator": "photoshape_flow demo <GENERATOR_VERSION>",
      "shapes": {source_id: {"kind", "in_collection", "path", "segmentation": "semantic|over|under",
                             "similar_to": source_id | null,
                             "parts": [{"index", "name", "roles": [...]}, ...]}},
      "materials": {name: {"substance", "path"}},
      "envmaps": [name, ...],                  # the collection (envmaps/<name>.hdr)
      "heldout_envmaps": [name, ...],          # used for exemplars only (groundtruth/envmaps/)
-     "exemplars": {stem: {"image", "mask", "size", "shape": source_id, "in_collection", "similar_to",
-                          "camera": {"azimuth", "elevation", "distance", "fov"},
-                          "part_names": {"1": name, ...},          # mask value -> part name
-                          "parts": {name: {"material", "substance"}},
-                          "visible_parts": [name, ...],            # parts with pixels in the mask
-                          "envmap": {"name", "rotation", "scale"},
-                          "degradation": {...}, "spec_hash": str}}}
+     "exemplars": [{"source": "demo-<size>", "source_id": stem,            # the format's fields
+                    "shape": {"source": "demo-<size>", "source_id": ...}, "in_collection",
+                    "camera": {"azimuth", "elevation", "distance", "fov"},
+                    "parts": {name: {"material", "substance"}},
+                    "mask": {"path", "kind": "part", "values": {"1": name, ...}},
+                    "image", "size", "similar_to", "visible_parts",      # the demo's own
+                    "envmap": {"name", "rotation", "scale"}, "degradation": {...}, "spec_hash": str}, ...]}
 
 The evaluators take the typed `GroundTruth` or, in tests and scripts, a plain mapping from an
 exemplar's stem to a dict with the same field names; `exemplar_records`, `record_for_source`,
@@ -33,7 +36,16 @@ from typing import Any
 
 import numpy as np
 
-GROUNDTRUTH_VERSION = 1
+from photoshape_flow.evaluation.groundtruth import (
+    FORMAT,
+    VERSION,
+    PartTruth,
+    parse_groundtruth_data,
+    read_part_mask,
+    source_keys,
+)
+
+GROUNDTRUTH_FORMAT, GROUNDTRUTH_VERSION = FORMAT, VERSION
 
 
 @dataclass(frozen=True)
@@ -47,13 +59,6 @@ class CameraTruth:
         from photoshape_flow.render.camera import Camera
 
         return Camera(self.azimuth, self.elevation, self.distance, self.fov)
-
-
-@dataclass(frozen=True)
-class PartTruth:
-    name: str
-    material: str
-    substance: str
 
 
 @dataclass(frozen=True)
@@ -130,10 +135,12 @@ def _opt(value: Any) -> str | None:
 
 
 def parse_groundtruth(data: dict[str, Any], root: Path) -> GroundTruth:
-    """GroundTruth from the decoded JSON; paths are resolved against `root`."""
-    version = data.get("version")
-    if version != GROUNDTRUTH_VERSION:
-        raise ValueError(f"groundtruth version {version!r} not supported (expected {GROUNDTRUTH_VERSION})")
+    """GroundTruth from the decoded JSON; paths are resolved against `root`. The exemplars are read by
+    the general format's parser (`evaluation.groundtruth`), so the demo's file is checked like
+    any user's; a demo file with a bad entry is a bug, hence an error here."""
+    general = parse_groundtruth_data(data, root)
+    if general.problems:
+        raise ValueError(f"{root}: demo ground truth has bad entries: {'; '.join(general.problems)}")
     shapes = {
         sid: ShapeTruth(
             source_id=sid,
@@ -150,18 +157,21 @@ def parse_groundtruth(data: dict[str, Any], root: Path) -> GroundTruth:
         name: MaterialTruth(name, str(m["substance"]), root / m["path"]) for name, m in data["materials"].items()
     }
     exemplars = {}
-    for stem, e in data["exemplars"].items():
-        exemplars[stem] = ExemplarTruth(
-            stem=stem,
+    for entry in general.entries:
+        e, camera = entry.extra, entry.camera
+        if camera is None or entry.mask is None or camera.distance is None or camera.fov is None:
+            raise ValueError(f"{root}: demo ground truth {entry.label} lacks its camera or mask")
+        exemplars[entry.stem] = ExemplarTruth(
+            stem=entry.stem,
             image=root / e["image"],
-            mask=root / e["mask"],
+            mask=entry.mask.path,
             size=int(e["size"]),
-            shape=str(e["shape"]),
-            in_collection=bool(e["in_collection"]),
+            shape=entry.shape,
+            in_collection=bool(entry.in_collection),
             similar_to=_opt(e.get("similar_to")),
-            camera=CameraTruth(**{k: float(e["camera"][k]) for k in ("azimuth", "elevation", "distance", "fov")}),
-            part_names=dict(sorted((int(k), str(v)) for k, v in e["part_names"].items())),
-            parts={name: PartTruth(name, str(p["material"]), str(p["substance"])) for name, p in e["parts"].items()},
+            camera=CameraTruth(camera.azimuth, camera.elevation, camera.distance, camera.fov),
+            part_names=dict(sorted(entry.part_names.items())),
+            parts=dict(entry.parts),
             visible_parts=tuple(e.get("visible_parts", ())),
             envmap=dict(e.get("envmap", {})),
             degradation=dict(e.get("degradation", {})),
@@ -191,26 +201,9 @@ def load_groundtruth(path: Path | str) -> GroundTruth:
     return parse_groundtruth(data, path.parent)
 
 
-def read_part_mask(path: Path) -> np.ndarray:
-    """A part-index mask file as stored (values are part numbers, 0 = background)."""
-    import cv2
-
-    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if mask is None:
-        raise FileNotFoundError(f"{path}: cannot read the part mask")
-    return mask
-
-
 def exemplar_records(groundtruth: Any) -> dict[str, Any]:
     """stem -> exemplar record: the ``exemplars`` of a `GroundTruth`, or a plain mapping itself."""
     return dict(getattr(groundtruth, "exemplars", groundtruth))
-
-
-def source_keys(source_id: str) -> tuple[str, str, str]:
-    """The keys a ground truth may list an ingested exemplar under, most specific first: its
-    source_id, the file name in it, and that name without its extension (the demo's stem)."""
-    name = source_id.rsplit("/", 1)[-1]
-    return source_id, name, name.rsplit(".", 1)[0]
 
 
 def record_for_source(records: Mapping[str, Any], source_id: str) -> Any | None:

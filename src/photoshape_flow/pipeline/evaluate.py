@@ -1,7 +1,9 @@
-"""`photoshape eval`: compare what the pipeline recorded with the demo's ground truth.
+"""`photoshape eval`: compare what the pipeline recorded with a ground-truth file.
 
-Every stage's metrics land in the `evaluation` table as (run, stage, method, metric, value, count),
-so runs can be compared in SQL. Stages:
+The file is the format of docs/evaluation.md (`evaluation.groundtruth`; the demo writes its own
+ground truth in it, so the demo is scored by this same path). Every stage's metrics land in the
+`evaluation` table as (run, stage, method, metric, value, count), tagged with the file's sha256, so
+runs can be compared in SQL. Stages:
 
 - coarse-alignment: shape recall@1/@5, median pose error, silhouette IoU for the nearest-shape case.
 - fine-alignment: part-label accuracy after coarse, flow and CRF (and silhouette IoU).
@@ -13,6 +15,10 @@ so runs can be compared in SQL. Stages:
   ground-truth substance the one covering most, as for the substances stage), so pairs with a merely
   similar shape are scored too — and the re-render error of the PhotoShape at the
   exemplar's camera inside the exemplar's mask (RMSE and SSIM).
+
+Without a mask an entry's parts are scored by name, on the pairs whose shape is the exemplar's true
+one (a part's truth is then the entry's part of the same name); pose error needs a camera and
+part-label accuracy a part mask, so entries without them simply do not count there.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import datetime as dt
 import logging
 import math
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +42,9 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
+from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -54,36 +63,25 @@ class Metric:
 
 # --- ground truth in the stored exemplar frame --------------------------------------------------------
 
-def _exemplar_truths(session: Session, gt: Any, source: str | None) -> dict[int, Any]:
-    """exemplar id -> its ground-truth record (matched by file stem = source_id)."""
-    query = sa.select(m.Exemplar).where(m.Exemplar.status == "ok")
-    if source is not None:
-        query = query.where(m.Exemplar.source == source)
-    out = {}
-    for exemplar in session.execute(query).scalars():
-        stem = Path(exemplar.source_id).stem
-        if stem in gt.exemplars:
-            out[exemplar.id] = gt.exemplars[stem]
-    return out
-
-
-def truth_labels(truth: Any, exemplar: m.Exemplar) -> tuple[np.ndarray, list[str], list[str]]:
+def truth_labels(truth: TruthEntry, exemplar: m.Exemplar) -> tuple[np.ndarray, list[str], list[str]]:
     """Ground-truth material and substance labels per pixel of the stored exemplar frame.
 
-    Returns (labels (S, S) int: 0 background, i = index into the two name lists + 1).
+    Returns (labels (S, S) int: 0 background, i = index into the two name lists + 1, the material and
+    the substance of each label); labels are the mask's parts (or materials) sorted by name.
     """
     native = truth.load_mask()
     if native.ndim == 3:
         native = native[..., 0]
-    names = sorted(truth.parts)
-    lut = np.zeros(int(max(max(truth.part_names, default=0), int(native.max(initial=0)))) + 1, np.int32)
-    for value, name in truth.part_names.items():
-        if name in truth.parts:
-            lut[int(value)] = names.index(name) + 1
+    by_value = truth.pixel_truths()
+    names = sorted({p.name for p in by_value.values()})
+    part_of = {p.name: p for p in by_value.values()}
+    lut = np.zeros(int(max(max(by_value, default=0), int(native.max(initial=0)))) + 1, np.int32)
+    for value, part in by_value.items():
+        lut[int(value)] = names.index(part.name) + 1
     crop = (exemplar.meta or {}).get("crop") or {"x0": 0, "y0": 0, "side": max(native.shape)}
     cropped = crop_square(lut[native.astype(np.int64)], int(crop["x0"]), int(crop["y0"]), int(crop["side"]), fill=0)
     labels = resize_labels(cropped.astype(np.int32), int(exemplar.size or cropped.shape[0]))
-    return labels, [truth.parts[n].material for n in names], [truth.parts[n].substance for n in names]
+    return labels, [part_of[n].material for n in names], [part_of[n].substance for n in names]
 
 
 def majority_label(labels: np.ndarray, mask: np.ndarray, min_fraction: float = 0.5) -> int | None:
@@ -118,9 +116,36 @@ def _part_map(store: BlobStore, alignment: m.Alignment, size: int) -> np.ndarray
     return resize_labels(part_map, size).astype(np.int32)
 
 
+def pair_truths(session: Session, store: BlobStore, pair: m.Pair, exemplar: m.Exemplar, alignment: m.Alignment,
+                truth: TruthEntry) -> dict[int, tuple[str, str]]:
+    """Shape part index -> the (material, substance) that part of this pair is scored against.
+
+    With a mask: the material and the substance covering most of the part's aligned pixels (parts
+    sharing a material merged first; parts mostly over background are not scored). Without one:
+    the entry's part of the same name, and only when the pair's shape is the exemplar's true shape.
+    """
+    parts = dict(session.execute(sa.select(m.Part.index, m.Part.name).where(m.Part.shape_id == pair.shape_id)).all())
+    if truth.mask is None:
+        shape = session.get(m.Shape, pair.shape_id)
+        if shape is None or truth.shape_ref != ItemRef(shape.source, shape.source_id):
+            return {}
+        return {i: (truth.parts[n].material, truth.parts[n].substance) for i, n in parts.items() if n in truth.parts}
+    labels, mats, subs = truth_labels(truth, exemplar)
+    mat_labels, mat_names = merge_labels(labels, mats)
+    sub_labels, sub_names = merge_labels(labels, subs)
+    part_map = _part_map(store, alignment, labels.shape[0])
+    out = {}
+    for index in parts:
+        mask = part_map == index
+        material, substance = majority_label(mat_labels, mask), majority_label(sub_labels, mask)
+        if material is not None and substance is not None:  # both label the same pixels: None together
+            out[index] = (mat_names[material - 1], sub_names[substance - 1])
+    return out
+
+
 # --- stages ----------------------------------------------------------------------------------------
 
-def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, Any]) -> list[Metric]:
+def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, TruthEntry]) -> list[Metric]:
     correct = total = 0
     rows = session.execute(
         sa.select(m.PartSubstance, m.Pair, m.Part, m.Alignment, m.Exemplar)
@@ -131,18 +156,15 @@ def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, An
         .where(m.PartSubstance.observed, m.Alignment.status == "ok", m.Pair.exemplar_id.in_(list(truths)),
                ~m.Pair.exclude)
     ).all()
-    cache: dict[int, tuple[np.ndarray, list[str], np.ndarray]] = {}
+    cache: dict[int, dict[int, tuple[str, str]]] = {}
     for ps, pair, part, alignment, exemplar in rows:
         if pair.id not in cache:
-            labels, _, subs = truth_labels(truths[exemplar.id], exemplar)
-            sub_labels, subs = merge_labels(labels, subs)
-            cache[pair.id] = (sub_labels, subs, _part_map(store, alignment, labels.shape[0]))
-        labels, subs, part_map = cache[pair.id]
-        winner = majority_label(labels, part_map == part.index)
-        if winner is None:
+            cache[pair.id] = pair_truths(session, store, pair, exemplar, alignment, truths[exemplar.id])
+        truth = cache[pair.id].get(part.index)
+        if truth is None:
             continue
         total += 1
-        correct += int(ps.substance == subs[winner - 1])
+        correct += int(ps.substance == truth[1])
     return [Metric("substances", "substance-network", "part_substance_accuracy",
                    correct / total if total else None, total)]
 
@@ -227,8 +249,8 @@ def rerender_error(render: np.ndarray, exemplar: np.ndarray, mask: np.ndarray) -
 
 
 def evaluate_inference(
-    session: Session, store: BlobStore, truths: dict[int, Any], *, rerender_size: int = 128, rerender_spp: int = 16,
-    rerender_max_pairs: int | None = 200,
+    session: Session, store: BlobStore, truths: dict[int, TruthEntry], *, rerender_size: int = 128,
+    rerender_spp: int = 16, rerender_max_pairs: int | None = 200,
 ) -> list[Metric]:
     """Material top-1/top-5 and substance accuracy per part, re-render RMSE/SSIM per pair, per method."""
     rows = session.execute(
@@ -246,7 +268,7 @@ def evaluate_inference(
         ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
         method_of[a.method_key] = a.method
     scores: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
-    truth_cache: dict[int, Any] = {}
+    truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
     rerender_pairs: dict[str, int] = defaultdict(int)
     rerenderer: _Rerenderer | None = None
     for (pair_id, method_key), parts in ranked.items():
@@ -259,21 +281,16 @@ def evaluate_inference(
         if alignment is None:
             continue
         if pair_id not in truth_cache:
-            labels, mats, subs = truth_labels(truths[exemplar.id], exemplar)
-            truth_cache[pair_id] = (*merge_labels(labels, mats), *merge_labels(labels, subs),
-                                    _part_map(store, alignment, labels.shape[0]))
-        mat_labels, mats, sub_labels, subs, part_map = truth_cache[pair_id]
+            truth_cache[pair_id] = pair_truths(session, store, pair, exemplar, alignment, truths[exemplar.id])
         for part_index, choices in parts.items():
-            mask = part_map == part_index
-            winner = majority_label(mat_labels, mask)
-            if winner is None:
+            truth = truth_cache[pair_id].get(part_index)
+            if truth is None:
                 continue
             names = [c[0] for c in choices]
-            scores[method_key]["material_top1"].append(float(names[:1] == [mats[winner - 1]]))
-            scores[method_key]["material_top5"].append(float(mats[winner - 1] in names[:5]))
-            substance = majority_label(sub_labels, mask)  # labelled wherever mat_labels are: not None
-            if choices[0][1] is not None and substance is not None:
-                scores[method_key]["substance_accuracy"].append(float(choices[0][1] == subs[substance - 1]))
+            scores[method_key]["material_top1"].append(float(names[:1] == [truth[0]]))
+            scores[method_key]["material_top5"].append(float(truth[0] in names[:5]))
+            if choices[0][1] is not None:
+                scores[method_key]["substance_accuracy"].append(float(choices[0][1] == truth[1]))
         # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
         if pair.exemplar_rank not in (None, 1):
             continue
@@ -326,29 +343,39 @@ def run_evaluation(
     rerender_size: int = 128,
     rerender_spp: int = 16,
     rerender_max_pairs: int | None = 200,
+    on_problem: Callable[[str], None] | None = None,
 ) -> tuple[str, list[Metric]]:
-    """Evaluate what the database holds against a demo ground truth; stores and returns the metrics."""
-    from photoshape_flow.demo import load_groundtruth
+    """Evaluate what the database holds against a ground-truth file; stores and returns the metrics.
 
+    Each entry left out (malformed, or naming what the database lacks) is passed to `on_problem`
+    (default: a warning in the log) and the others are scored; the file is registered as the default
+    for the next evaluation, and every stored figure carries its sha256. Raises ValueError when the
+    file is unreadable or no entry matches an ingested exemplar.
+    """
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
-    gt = load_groundtruth(groundtruth)
+    gt = read_groundtruth_file(groundtruth)
     run = run or dt.datetime.now(dt.UTC).strftime("eval-%Y%m%d-%H%M%S")
     stages = set(stages)
     metrics: list[Metric] = []
     with session_scope(settings.resolved_database_url) as session:
-        truths = _exemplar_truths(session, gt, exemplar_source)
-        if not truths:
-            raise ValueError(f"no ingested exemplar matches the ground truth in {groundtruth}")
+        matched = match_groundtruth(session, gt, exemplar_source)
+        for problem in matched.problems:
+            (on_problem or log.warning)(problem)
+        if not matched.truths:
+            raise ValueError(f"no ingested exemplar matches the ground truth in {groundtruth}"
+                             f" ({len(matched.problems)} entries left out)")
+        truths, records = matched.truths, matched.by_source_id()
         if "coarse-alignment" in stages:
             from photoshape_flow.pipeline.coarse_alignment import evaluate_coarse_alignment
 
-            metrics += _dict_metrics("coarse-alignment", "hog", evaluate_coarse_alignment(session, gt))
+            metrics += _dict_metrics("coarse-alignment", "hog", evaluate_coarse_alignment(session, records))
         if "fine-alignment" in stages:
             from photoshape_flow.pipeline.fine_alignment import evaluate_fine_alignment
 
+            with_part_masks = {k: e for k, e in records.items() if e.part_names}
             metrics += _dict_metrics("fine-alignment", "flow-crf",
-                                     evaluate_fine_alignment(session, gt, settings=settings))
+                                     evaluate_fine_alignment(session, with_part_masks, settings=settings))
         if "substances" in stages:
             metrics += evaluate_substances(session, store, truths)
         if "training" in stages:
@@ -357,12 +384,13 @@ def run_evaluation(
             metrics += evaluate_inference(session, store, truths, rerender_size=rerender_size,
                                           rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs)
     with session_scope(settings.resolved_database_url) as session:
+        params = {"groundtruth": str(groundtruth), "exemplars": len(truths), "skipped": len(matched.problems)}
         for metric in metrics:
             upsert(session, m.Evaluation, {
                 "run": run, "stage": metric.stage, "method": metric.method, "metric": metric.metric,
-                "value": metric.value, "count": metric.count,
-                "params": {"groundtruth": str(groundtruth), "exemplars": len(truths)},
+                "value": metric.value, "count": metric.count, "params": params, "groundtruth_sha256": gt.sha256,
             }, key=["run", "stage", "method", "metric"])
+        register_groundtruth(session, gt, len(truths), len(matched.problems))
     return run, metrics
 
 

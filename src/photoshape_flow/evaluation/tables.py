@@ -1,0 +1,109 @@
+"""The headline of an evaluation: ours against each baseline on the main metrics, then the shared
+stages' main figures, as rows of plain strings.
+
+`photoshape eval`, `photoshape demo` and the `evaluate` flow all print (or publish) these rows first
+and the full metric table below, so a reader sees the comparison before the 80 figures behind it.
+Pure functions over `Metric`s: no database, no terminal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from photoshape_flow.vocab import ASSIGNMENT_METHODS
+
+# (metric, column title): short titles so the table fits an 80-column terminal; HEADLINE_TITLE says
+# what they are (RMSE is the one where lower is better)
+HEADLINE_METRICS: tuple[tuple[str, str], ...] = (
+    ("material_top1", "top-1"),
+    ("material_top5", "top-5"),
+    ("substance_accuracy", "subst."),
+    ("rerender_rmse", "RMSE"),
+    ("rerender_ssim", "SSIM"),
+)
+HEADLINE_TITLE = ("ours, then each baseline: material top-1 / top-5 and substance accuracy per scored part "
+                  "(\"vs ours\": top-1 minus ours'), re-render RMSE (lower is better) and SSIM per pair; "
+                  "how many were scored is in the full table")
+STAGES_TITLE = ("shared stages: recall and pose over exemplars of a collection shape (pose: those with a "
+                "camera), part labels over pairs of the true shape with a part mask, substances over parts")
+OURS = "classifier"
+MISSING = "-"
+
+
+def fmt(value: float | None, digits: int = 3) -> str:
+    return MISSING if value is None else f"{value:.{digits}f}"
+
+
+def _method_order(method_key: str) -> tuple[int, int, str]:
+    """Ours first (the newest classifier first), then the baselines in the order tables list them."""
+    base, _, suffix = method_key.partition(":")
+    rank = ASSIGNMENT_METHODS.index(base) if base in ASSIGNMENT_METHODS else len(ASSIGNMENT_METHODS)
+    return rank, -int(suffix) if suffix.isdigit() else 0, method_key
+
+
+def _method_label(method_key: str) -> str:
+    base, _, suffix = method_key.partition(":")
+    if base == OURS:
+        return f"ours (classifier {suffix})" if suffix else "ours"
+    return method_key
+
+
+def headline_rows(metrics: Sequence[Any]) -> list[dict[str, str]]:
+    """One row per assignment method (ours first, then the baselines): the main inference metrics and
+    how far top-1 lies from ours. Narrow on purpose (fits 80 columns); counts are in the full table."""
+    values = {(x.method, x.metric): x for x in metrics if x.stage == "inference"}
+    methods = sorted({method for method, _ in values}, key=_method_order)
+    ours = next((k for k in methods if k.partition(":")[0] == OURS), None)
+    reference = values.get((ours, "material_top1")) if ours else None
+    rows = []
+    for method in methods:
+        row = {"method": _method_label(method)}
+        for metric, title in HEADLINE_METRICS:
+            found = values.get((method, metric))
+            row[title] = fmt(found.value if found else None)
+        top1 = values.get((method, "material_top1"))
+        if method == ours or reference is None or reference.value is None or top1 is None or top1.value is None:
+            row["vs ours"] = ""
+        else:
+            row["vs ours"] = f"{top1.value - reference.value:+.3f}"
+        rows.append(row)
+    return rows
+
+
+def _joined(values: dict[str, float | None], names: Sequence[str], sep: str, digits: int = 3) -> str:
+    return sep.join(fmt(values.get(n), digits) for n in names)
+
+
+def stage_rows(metrics: Sequence[Any]) -> list[dict[str, str]]:
+    """The shared stages' main figures (retrieval, pose, part labels, substances), where measured; see
+    STAGES_TITLE for what each is over."""
+    by_stage: dict[str, dict[str, float | None]] = {}
+    counts: dict[tuple[str, str], int | None] = {}
+    for x in metrics:
+        by_stage.setdefault(x.stage, {})[x.metric] = x.value
+        counts[(x.stage, x.metric)] = x.count
+    coarse, fine = by_stage.get("coarse-alignment", {}), by_stage.get("fine-alignment", {})
+    subs = by_stage.get("substances", {})
+
+    def over(value: float | None, what: str) -> str:
+        return MISSING if value is None else f"{int(value)} {what}"
+
+    rows = []
+    if coarse.get("recall@1") is not None:
+        rows.append({"figure": "shape recall@1 / @5", "value": _joined(coarse, ("recall@1", "recall@5"), " / "),
+                     "over": over(coarse.get("n_in_collection"), "exemplars")})
+    if coarse.get("median_azimuth_error_deg") is not None:
+        rows.append({"figure": "median pose error az / el (deg)",
+                     "value": _joined(coarse, ("median_azimuth_error_deg", "median_elevation_error_deg"), " / ",
+                                      digits=1),
+                     "over": over(coarse.get("n_pose"), "exemplars")})
+    if fine.get("accuracy_crf") is not None:
+        rows.append({"figure": "part labels coarse / flow / CRF",
+                     "value": _joined(fine, ("accuracy_coarse", "accuracy_flow", "accuracy_crf"), " / "),
+                     "over": over(fine.get("n_exact"), "pairs")})
+    if subs.get("part_substance_accuracy") is not None:
+        n = counts.get(("substances", "part_substance_accuracy"))
+        rows.append({"figure": "substance network", "value": fmt(subs["part_substance_accuracy"]),
+                     "over": over(n, "parts")})
+    return rows
