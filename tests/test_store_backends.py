@@ -98,6 +98,20 @@ def test_gc_removes_only_old_unreferenced_blobs(make_store: MakeStore) -> None:
     assert not store.path(old).exists()  # a remote store's cached copy goes too
 
 
+@pytest.mark.parametrize("root", ("local", "file"), indirect=True)
+def test_gc_sweeps_a_crashed_writers_temporary(make_store: MakeStore) -> None:
+    store = make_store()
+    ref = store.put_bytes(b"kept", "bin")
+    base = Path(store.root if not store.is_remote else store._backend.base)
+    leftover = base / ref[:2] / ref[2:4] / ".tmp-crashed"
+    leftover.write_bytes(b"half")
+    assert list(store.iter_refs()) == [ref]  # never mistaken for a blob
+    store.gc([ref], grace_seconds=3600)
+    assert leftover.exists()  # young: may be a write in flight
+    store.gc([ref], grace_seconds=-1)
+    assert not leftover.exists() and store.exists(ref)
+
+
 def _fail_mid_write(kind: str, store: BlobStore, monkeypatch: pytest.MonkeyPatch) -> None:
     """Make the next write die part-way, the way each backend can: after the temporary file's bytes
     (local: before the rename; file://: half the bytes, then an error), or as a failed whole-object put."""
