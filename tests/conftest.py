@@ -34,6 +34,7 @@ def settings_env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Pa
     data_root = tmp_path / "data"
     monkeypatch.setenv("PHOTOSHAPE_DATA_ROOT", str(data_root))
     monkeypatch.delenv("PHOTOSHAPE_DATABASE_URL", raising=False)
+    monkeypatch.delenv("PHOTOSHAPE_BLOB_ROOT", raising=False)
     get_settings.cache_clear()
     get_engine.cache_clear()
     yield data_root

@@ -11,7 +11,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, ValidationInfo, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -23,6 +23,13 @@ class Settings(BaseSettings):
     data_root: Path = Field(
         default=Path("./photoshape-data"),
         description="Folder holding the blob store, the default SQLite database and generated data.",
+    )
+    blob_root: Path | str | None = Field(
+        default=None,
+        validate_default=True,
+        description="Where blobs live: a folder, or an fsspec URL shared by workers on several machines "
+        "(s3://bucket/blobs, gs://bucket/blobs, file:///mnt/shared/blobs; the protocol's package, e.g. s3fs, "
+        "must be installed). Default: data_root/blobs. A URL store is read through data_root/cache/blobs.",
     )
     database_url: str | None = Field(
         default=None,
@@ -88,6 +95,15 @@ class Settings(BaseSettings):
                 return "postgresql+psycopg://" + value[len(prefix) :]
         return value
 
+    @field_validator("blob_root")
+    @classmethod
+    def _blob_root(cls, value: Path | str | None, info: ValidationInfo) -> Path | str:
+        """A URL stays a string (fsspec parses it); a folder becomes a Path; unset: data_root/blobs."""
+        if value is None or str(value).strip() == "":
+            return Path(info.data.get("data_root") or "./photoshape-data") / "blobs"
+        text = str(value).strip()
+        return text if "://" in text else Path(text)
+
     @field_validator("dask_dashboard_address")
     @classmethod
     def _no_dashboard(cls, value: str | None) -> str | None:
@@ -104,8 +120,9 @@ class Settings(BaseSettings):
         return f"sqlite:///{(self.data_root / 'photoshape.db').resolve()}"
 
     @property
-    def blob_root(self) -> Path:
-        return self.data_root / "blobs"
+    def blob_cache_root(self) -> Path:
+        """This machine's read-through cache of a blob store at a URL (unused for a folder)."""
+        return self.data_root / "cache" / "blobs"
 
     @property
     def effective_render_threads(self) -> int:

@@ -105,6 +105,30 @@ def check_data_root() -> list[Check]:
     return [writable, disk]
 
 
+def check_blob_store() -> Check:
+    """Where blobs live; a URL store is listed with its credentials masked and probed once."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.masking import mask_password
+    from photoshape_flow.store import BlobStore, is_url
+
+    settings = get_settings()
+    root = settings.blob_root
+    if not is_url(root):
+        return Check("blob store", True, f"{Path(root).resolve()} (local folder)")
+    shown = mask_password(str(root))
+    hint = "set PHOTOSHAPE_BLOB_ROOT to a reachable URL; fsspec reads credentials from the protocol's usual " \
+           "places (AWS_* variables, ~/.aws, GOOGLE_APPLICATION_CREDENTIALS) or FSSPEC_<PROTOCOL>_<OPTION>"
+    try:
+        BlobStore(root).exists("0" * 64 + ".bin")  # one round trip: reachable, credentials accepted
+    except ImportError as exc:
+        return Check("blob store", False, f"{shown}: {mask_password(str(exc))}",
+                     "install the protocol's fsspec package (s3fs, gcsfs, adlfs)")
+    except Exception as exc:
+        detail = mask_password(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        return Check("blob store", False, f"{shown}: {detail}", hint)
+    return Check("blob store", True, f"{shown} reachable; cached in {settings.blob_cache_root.resolve()}")
+
+
 def check_torch() -> Check:
     try:
         import torch
@@ -156,9 +180,10 @@ def check_prefect() -> Check:
 
 
 def doctor() -> None:
-    """Check Mitsuba/LLVM, the database, the data root, disk and optional tools; each with a fix hint."""
+    """Check Mitsuba/LLVM, the database, data root, disk, blob store and optional tools; each with a fix hint."""
     runners: list[Callable[[], Check | list[Check]]] = [
-        check_python, check_renderer, check_database, check_data_root, check_torch, check_optional, check_prefect,
+        check_python, check_renderer, check_database, check_data_root, check_blob_store, check_torch, check_optional,
+        check_prefect,
     ]
     checks: list[Check] = []
     for run in runners:

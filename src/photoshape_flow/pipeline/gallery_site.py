@@ -33,8 +33,7 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
     def blob_path(ref: str | None) -> Path | None:
         if not ref:
             return None
-        path = store.path(ref)
-        return path if path.is_file() else None
+        return store.resolve(ref) if store.exists(ref) else None
 
     entries: list[GalleryEntry] = []
     used: set[int] = set()

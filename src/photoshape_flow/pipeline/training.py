@@ -121,7 +121,7 @@ def training_data(
     train, val, manifest = [], [], []
     for kind, key, split, beauty, ids in usable:
         is_val = split == "val" if any_val else _held_out(f"{kind}/{key}", val_fraction)
-        item = RenderItem(store.path(beauty), store.path(ids), f"{kind}/{key}")
+        item = RenderItem(store.resolve(beauty), store.resolve(ids), f"{kind}/{key}")
         (val if is_val else train).append(item)
         manifest.append([kind, key, beauty, ids, "val" if is_val else "train"])
     source = "split" if any_val else ("held-out" if val else "none")
@@ -209,7 +209,7 @@ def _drop_superseded(store: BlobStore, old: str | None, new: str) -> None:
     the newest is ever resumed from, so waiting for `gc` would pile one up per epoch.
     """
     if old and old != new:
-        store.path(old).unlink(missing_ok=True)
+        store.delete(old)
 
 
 def run_training(
