@@ -49,6 +49,7 @@ from photoshape_flow.pipeline.calibration import (
     stored_temperature,
     substance_networks,
 )
+from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
 from photoshape_flow.vocab import SUBSTANCES
@@ -359,6 +360,7 @@ def run_inference(
     settings: Settings | None = None,
     color_prior: bool = True,
     calibrate_substances: bool = True,
+    progress: Progress | None = None,
 ) -> InferenceSummary:
     """Write ranked assignments for every pending pair with one method; resumable and idempotent.
 
@@ -380,6 +382,13 @@ def run_inference(
         todo = pending_pairs(session, method_key, expected)
     summary = InferenceSummary(method_key=method_key)
     stage = f"inference:{method_key}"
+    report = progress or no_progress
+
+    def tick() -> None:
+        handled = summary.pairs_done + summary.pairs_skipped + len(summary.pairs_failed)
+        report(f"inference {method_key} pairs", handled, len(todo))
+
+    tick()
     for start in range(0, len(todo), batch_size):
         keys = [str(p) for p in todo[start : start + batch_size]]
         with session_scope(url) as session:
@@ -388,6 +397,7 @@ def run_inference(
                 mine += claims.claim(session, stage, [key], params_hash=expected[int(key)],
                                      lease_seconds=settings.claim_lease_seconds, retry_failed=True)
         summary.pairs_skipped += len(keys) - len(mine)
+        tick()
         for key in mine:
             pair_id = int(key)
             try:
@@ -403,6 +413,7 @@ def run_inference(
                 summary.pairs_failed.append((pair_id, reason))
                 with session_scope(url) as session:
                     claims.fail(session, stage, key, reason)
+            tick()
     log.info("inference %s: %d pairs, %d rows, %d failed", method_key, summary.pairs_done, summary.rows,
              len(summary.pairs_failed))
     return summary

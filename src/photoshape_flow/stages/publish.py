@@ -34,7 +34,7 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
     ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
     summary = run_publish(ids, None, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
-                          formats=cfg.formats)
+                          formats=cfg.formats, progress=ctx.progress)
     report = StageReport(NAME, done=summary.rendered, skipped=summary.skipped, failed=summary.failed,
                          details={"publish": summary.as_dict()})
     if work is None:
