@@ -7,8 +7,8 @@ import re
 import pytest
 from tests.pipeline.test_publish import seed
 
-from photoshape_flow.cli.progress import PlainProgress, progress_line
-from photoshape_flow.progress_sink import counted
+from photoshape_flow.cli.progress import PlainProgress
+from photoshape_flow.progress_sink import counted, progress_line
 
 
 def test_plain_lines_every_tenth_and_every_ten_seconds_with_rate_and_eta():

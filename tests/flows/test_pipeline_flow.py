@@ -69,6 +69,8 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
     assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
                                        "training-renders", "training", "inference", "publish"]
     assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-progress"} <= keys
+    # the loops inside the tasks report their item counts too (the CLI's progress, as artifacts)
+    assert data["fine-alignment-pairs-items"] == 100.0 and data["publish-pairs-items"] == 100.0, sorted(keys)
     # nothing is pending after a finished run: publish counts only pairs up to the tiny profile's max_rank
     assert {p.stage: p.pending for p in finished} == dict.fromkeys(result["seconds"], 0)
     renders = {p.stage: p for p in finished}["training-renders"]

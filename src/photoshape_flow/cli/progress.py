@@ -24,29 +24,7 @@ from rich.progress import (
 )
 
 from photoshape_flow.progress_sink import Progress as ProgressSink
-
-
-def clock_text(seconds: float) -> str:
-    """H:MM:SS or M:SS, the way rich shows times."""
-    whole = max(int(round(seconds)), 0)
-    hours, rest = divmod(whole, 3600)
-    minutes, secs = divmod(rest, 60)
-    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
-
-
-def progress_line(task: str, done: int, total: int, elapsed: float) -> str:
-    """One plain progress line: count, share, rate and ETA (rate and ETA once an item is done)."""
-    parts = [f"{task}: {done}/{total}" if total else f"{task}: {done}"]
-    if total:
-        parts[0] += f" ({100 * done // max(total, 1)}%)"
-    if done and elapsed > 0:
-        rate = done / elapsed
-        parts.append(f"{rate:.2f}/s" if rate < 10 else f"{rate:.0f}/s")
-        if total and done < total:
-            parts.append(f"ETA {clock_text((total - done) / rate)}")
-        elif total:
-            parts.append(f"took {clock_text(elapsed)}")
-    return ", ".join(parts)
+from photoshape_flow.progress_sink import progress_line
 
 
 @dataclass
