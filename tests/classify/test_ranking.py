@@ -77,3 +77,18 @@ def test_disabled_materials_are_not_ranked_and_lend_no_substance_mass() -> None:
     head = np.array([0.1, 0.28, 0.34, 0.28])
     policy = RankingPolicy(POLICY.materials, POLICY.material_substances, enabled=frozenset({4, 9}))
     assert ids(PartEvidence(head), policy) == [9, 4]  # 12 gone; wood's mass is 4's alone, fabric wins
+
+
+def test_the_posterior_normalises_scores_over_enabled_materials() -> None:
+    """Scores are products of experts (tiny); the posterior is the same order summing to 1 over enabled ones."""
+    substance = np.zeros(len(SUBSTANCE_LABELS))
+    substance[SUBSTANCE_LABELS.index("wood")], substance[SUBSTANCE_LABELS.index("fabric")] = 0.9, 0.1
+    head = np.array([0.7, 0.1, 0.15, 0.05])  # scores 0.09, 0.015, 0.045: sum 0.15
+    ranked = rank_part(PartEvidence(head, substance), POLICY, 3).materials
+    assert [r.posterior for r in ranked] == pytest.approx([0.6, 0.3, 0.1])
+    assert sum(r.posterior for r in ranked) == pytest.approx(1.0)
+    only = RankingPolicy((4, 9, 12), ("wood", "fabric", "wood"), substance_first=False, enabled=frozenset({4, 9}))
+    kept = rank_part(PartEvidence(head, substance), only, 3).materials
+    assert {r.material_id: r.posterior for r in kept} == pytest.approx({4: 0.09 / 0.105, 9: 0.015 / 0.105})
+    vetoed = rank_part(PartEvidence(head, color_weights=np.zeros(3)), only, 3).materials
+    assert [r.posterior for r in vetoed] == pytest.approx([0.5, 0.5])  # no evidence left: uniform, not certain

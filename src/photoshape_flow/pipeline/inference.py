@@ -59,7 +59,7 @@ log = logging.getLogger(__name__)
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
 # the ranking policy's version: part of every row's params_hash (docs/decisions.md lists each version)
-CODE_VERSION = "inference-8"
+CODE_VERSION = "inference-9"
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
 
@@ -274,7 +274,7 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
                            else substance_vector(None))
     ranked = rank_part(evidence, ctx.policy, ctx.top_k)
     item.head = ranked.head_used
-    return [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked.materials]
+    return [RankedMaterial(r.material_id, r.substance, r.score, r.posterior) for r in ranked.materials]
 
 
 def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, params_hash: str) -> int:
@@ -335,7 +335,8 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
                 rows.append(m.Assignment(
                     pair_id=pair.id, part_id=item.part.id, method=ctx.method, method_key=method_key,
                     classifier_id=ctx.classifier.id if ctx.method == "classifier" and ctx.classifier else None,
-                    rank=rank, material_id=r.material_id, score=r.score, substance=r.substance,
+                    rank=rank, material_id=r.material_id, score=r.score, posterior=r.posterior,
+                    substance=r.substance,
                     unobserved=item.mask is None,
                     params={"part_substance": item.substance.substance,
                             "substance_confidence": item.substance.probs.get(item.substance.substance or "", None),
