@@ -92,3 +92,16 @@ def test_the_posterior_normalises_scores_over_enabled_materials() -> None:
     assert {r.material_id: r.posterior for r in kept} == pytest.approx({4: 0.09 / 0.105, 9: 0.015 / 0.105})
     vetoed = rank_part(PartEvidence(head, color_weights=np.zeros(3)), only, 3).materials
     assert [r.posterior for r in vetoed] == pytest.approx([0.5, 0.5])  # no evidence left: uniform, not certain
+
+
+def test_reliability_bins_and_ece() -> None:
+    from photoshape_flow.classify.reliability import reliability
+
+    # 0.9-confident and right 9 of 10 times, 0.55-confident and right half the time: ECE 0.05 * 10/20
+    conf = np.array([0.9] * 10 + [0.55] * 10)
+    hit = np.array([True] * 9 + [False] + [True] * 5 + [False] * 5)
+    out = reliability(conf, hit)
+    assert [(b["lo"], b["count"], b["accuracy"]) for b in out.bins] == [(0.5, 10, 0.5), (0.9, 10, 0.9)]
+    assert out.ece == pytest.approx(0.025) and out.accuracy == pytest.approx(0.7)
+    assert reliability(np.array([1.0]), np.array([True])).ece == 0.0  # 1.0 falls in the last bin
+    assert reliability(np.array([]), np.array([])).ece is None
