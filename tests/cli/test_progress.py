@@ -18,9 +18,16 @@ def test_plain_lines_every_tenth_and_every_ten_seconds_with_rate_and_eta():
     for _ in counted(sink, "publish pairs", range(40)):
         now[0] += 0.5  # 2 items/s
     assert lines[0] == "publish pairs: 0/40 (0%)"
-    assert lines[1] == "publish pairs: 4/40 (10%), 2.00/s, ETA 0:18"
+    assert lines[1] == "publish pairs: 1/40 (2%), 2.00/s, ETA 0:20"  # the first item: the first ETA
+    assert lines[2] == "publish pairs: 4/40 (10%), 2.00/s, ETA 0:18"
     assert lines[-1] == "publish pairs: 40/40 (100%), 2.00/s, took 0:20"
-    assert len(lines) == 11  # the start, then every 4 items (a tenth)
+    assert len(lines) == 12  # the start, the first item, then every 4 items (a tenth)
+    fast: list[str] = []
+    sink = PlainProgress(fast.append, clock=lambda: now[0])
+    for _ in counted(sink, "inference pairs", range(10)):
+        now[0] += 0.01  # 100 items/s: a line per tenth would be noise
+    assert [line.split(",")[0] for line in fast] == [
+        "inference pairs: 0/10 (0%)", "inference pairs: 1/10 (10%)", "inference pairs: 10/10 (100%)"]
     slow: list[str] = []
     sink = PlainProgress(slow.append, clock=lambda: now[0])
     sink("training epochs", 0, 1000)

@@ -1,8 +1,9 @@
 """How the CLI shows the stages' progress (`progress_sink.Progress`): rich bars or plain lines.
 
 In a terminal each long loop gets a rich bar with its count, elapsed time and ETA. When stdout is
-not a terminal (a log file, CI, a pipe) bars would be noise, so each loop prints one plain line
-every `every_items` items or `every_seconds` seconds, and when it finishes:
+not a terminal (a log file, CI, a pipe) bars would be noise, so each loop prints a plain line at
+its start, after its first item, at each tenth (at most one a second), at least every
+`every_seconds` seconds while items finish, and at its end:
 `publish pairs: 12/40 (30%), 0.8/s, ETA 0:35`.
 """
 
@@ -35,14 +36,14 @@ class _Loop:
 
 
 class PlainProgress:
-    """The non-terminal sink: a line per loop every `every_items` items or `every_seconds` s, and at its end.
-
-    `every_items` of 0 means a tenth of the loop (at least 1); the clock is injectable for tests.
-    """
+    """The non-terminal sink: per loop a line at its start, after its first item (the first ETA),
+    each time it crosses a tenth (`every_items` items if set) but at most one per `min_seconds`,
+    at least one per `every_seconds` while items finish, and at its end. The clock is injectable."""
 
     def __init__(self, write: Callable[[str], None], every_items: int = 0, every_seconds: float = 10.0,
-                 clock: Callable[[], float] = time.monotonic):
-        self.write, self.every_items, self.every_seconds, self.clock = write, every_items, every_seconds, clock
+                 min_seconds: float = 1.0, clock: Callable[[], float] = time.monotonic):
+        self.write, self.every_items, self.clock = write, every_items, clock
+        self.every_seconds, self.min_seconds = every_seconds, min_seconds
         self.loops: dict[str, _Loop] = {}
 
     def __call__(self, task: str, done: int, total: int) -> None:
@@ -55,9 +56,15 @@ class PlainProgress:
             return
         if done == loop.printed_done:
             return  # nothing new (a repeated report, or the end printed already)
-        finished = total > 0 and done >= total
         step = self.every_items or max(total // 10, 1)
-        if finished or done - loop.printed_done >= step or now - loop.printed_at >= self.every_seconds:
+        since = now - loop.printed_at
+        due = (
+            (total > 0 and done >= total)
+            or loop.printed_done == 0
+            or (done // step > loop.printed_done // step and since >= self.min_seconds)
+            or since >= self.every_seconds
+        )
+        if due:
             loop.printed_at, loop.printed_done = now, done
             self.write(progress_line(task, done, total, now - loop.started))
 
