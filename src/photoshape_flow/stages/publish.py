@@ -46,6 +46,6 @@ def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far."""
     from photoshape_flow.pipeline.gallery_site import write_gallery_site
 
-    site = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
+    site = write_gallery_site(gallery_dir(ctx), None, ctx.settings, progress=ctx.progress)
     return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
                                       "gallery_waiting": site.waiting})
