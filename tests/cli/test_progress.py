@@ -57,3 +57,23 @@ def test_run_publish_off_a_terminal_prints_counts_eta_and_a_plain_summary(db_url
     cells = [c.strip() for c in re.split(r"[│┃]", row) if c.strip()]
     assert cells[0] == "publish" and all(c.replace(".", "").isdigit() for c in cells[1:]), cells
     assert "{" not in table
+
+
+def test_a_terminal_gets_rich_bars_and_a_pipe_plain_lines():
+    import io
+
+    from rich.console import Console
+
+    from photoshape_flow.cli.progress import RichProgress, cli_progress
+
+    terminal = Console(file=io.StringIO(), force_terminal=True, width=100)
+    with cli_progress(terminal) as sink:
+        assert isinstance(sink, RichProgress)
+        for _ in counted(sink, "publish pairs", range(3)):
+            pass
+        assert sink.bar.tasks[0].completed == 3 and sink.bar.tasks[0].total == 3
+    pipe = Console(file=io.StringIO(), force_terminal=False)
+    with cli_progress(pipe) as sink:
+        assert isinstance(sink, PlainProgress)
+        sink("export pairs", 0, 2)
+    assert pipe.file.getvalue() == "export pairs: 0/2 (0%)\n"
