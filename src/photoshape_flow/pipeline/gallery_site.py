@@ -55,7 +55,8 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
             GalleryPart(index=part.index, name=part.name, material_id=mat.id if mat else None,
                         material_name=mat.name if mat else None,
                         substance=(a.substance if a else None) or (mat.substance if mat else None),
-                        score=a.score if a else None, unobserved=bool(a.unobserved) if a else False)
+                        score=a.score if a else None, unobserved=bool(a.unobserved) if a else False,
+                        posterior=a.posterior if a else None)
             for part, a, mat in rows
         ]
         used.update(p.material_id for p in parts if p.material_id is not None)
