@@ -22,10 +22,12 @@ from photoshape_flow.progress_sink import progress_line
 
 
 def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None) -> list[dict[str, Any]]:
-    """One row per PhotoShape candidate: pair, shape, exemplar, method, weakest and mean part score."""
+    """One row per PhotoShape candidate: pair, shape, exemplar, method, weakest and mean part posterior
+    (the raw score for rows ranked before inference-9, which have none)."""
     query = """
         SELECT pair_id, shape_id, exemplar_id, method_key, COUNT(*) AS parts,
-               MIN(score) AS weakest_part, AVG(score) AS mean_score, MIN(hog_distance) AS hog_distance,
+               MIN(COALESCE(posterior, score)) AS weakest_part, AVG(COALESCE(posterior, score)) AS mean_score,
+               MIN(hog_distance) AS hog_distance,
                MIN(alignment_iou) AS alignment_iou
         FROM photoshape_candidate
         WHERE method = 'classifier'
