@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import logging
+import re
+import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import sqlalchemy as sa
@@ -15,13 +18,16 @@ from prefect.artifacts import (
 
 from photoshape_flow.config import get_settings
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.progress_sink import progress_line
 
 
 def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None) -> list[dict[str, Any]]:
-    """One row per PhotoShape candidate: pair, shape, exemplar, method, weakest and mean part score."""
+    """One row per PhotoShape candidate: pair, shape, exemplar, method, weakest and mean part posterior
+    (the raw score for rows ranked before inference-9, which have none)."""
     query = """
         SELECT pair_id, shape_id, exemplar_id, method_key, COUNT(*) AS parts,
-               MIN(score) AS weakest_part, AVG(score) AS mean_score, MIN(hog_distance) AS hog_distance,
+               MIN(COALESCE(posterior, score)) AS weakest_part, AVG(COALESCE(posterior, score)) AS mean_score,
+               MIN(hog_distance) AS hog_distance,
                MIN(alignment_iou) AS alignment_iou
         FROM photoshape_candidate
         WHERE method = 'classifier'
@@ -78,6 +84,42 @@ class Progress:
     def step(self) -> None:
         self.done += 1
         update_progress_artifact(self.id, progress=100.0 * self.done / self.total)
+
+
+class ArtifactProgress:
+    """The flows' progress sink (`progress_sink.Progress`): one Prefect progress artifact per loop.
+
+    Its percentage follows the loop and its description carries the same count, rate and ETA line
+    the CLI prints off a terminal. Updates are rate-limited to one per `every_seconds` (and the end)
+    so a fast loop does not flood the API; artifacts are best effort: a failure is logged once and
+    the stage goes on.
+    """
+
+    def __init__(self, every_seconds: float = 2.0, clock: Callable[[], float] = time.monotonic):
+        self.every_seconds, self.clock = every_seconds, clock
+        self.loops: dict[str, tuple[Any, float, float]] = {}  # task -> (artifact id, started, last update)
+        self.broken = False
+
+    def __call__(self, task: str, done: int, total: int) -> None:
+        if self.broken:
+            return
+        now = self.clock()
+        percent = 100.0 * done / total if total else 0.0
+        try:
+            if task not in self.loops or done == 0:
+                key = re.sub(r"[^a-z0-9]+", "-", task.lower()).strip("-") + "-items"
+                artifact = create_progress_artifact(progress=percent, key=key,
+                                                    description=progress_line(task, done, total, 0.0))
+                self.loops[task] = (artifact, now, now)
+                return
+            artifact, started, last = self.loops[task]
+            if now - last >= self.every_seconds or (total and done >= total):
+                update_progress_artifact(artifact, progress=percent,
+                                         description=progress_line(task, done, total, now - started))
+                self.loops[task] = (artifact, started, now)
+        except Exception as exc:  # progress is best effort: the stage's work matters more
+            self.broken = True
+            logging.getLogger(__name__).warning("progress artifacts off for this task: %s", exc)
 
 
 def publish_gallery_artifacts(gallery_index: str | None) -> dict[str, str]:

@@ -97,10 +97,12 @@ class PrefectEvents:
         return True
 
 
-def stage_context(settings: Settings | None = None) -> Any:
-    """The stage context of the CLI and of the flows: the settings, and events sent to Prefect."""
+def stage_context(settings: Settings | None = None, progress: Any = None) -> Any:
+    """The stage context of the CLI and of the flows: the settings, events sent to Prefect, and the
+    caller's progress sink (the CLI's bars or lines, a flow's progress artifacts; none by default)."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.stages import StageContext
 
     settings = settings or get_settings()
-    return StageContext.create(settings, events=PrefectEvents(settings))
+    extra = {} if progress is None else {"progress": progress}
+    return StageContext.create(settings, events=PrefectEvents(settings), **extra)

@@ -45,9 +45,12 @@ def local_cluster_kwargs(settings: Settings) -> dict[str, Any]:
 
 
 def stage_context() -> Any:
-    """The stage context inside a task; the project's log lines go to the task run in the UI."""
+    """The stage context inside a task: the project's log lines go to the task run in the UI, and its
+    loops' progress to progress artifacts (`artifacts.ArtifactProgress`)."""
+    from photoshape_flow.flows.artifacts import ArtifactProgress
+
     forward_project_logs()
-    return _stage_context()
+    return _stage_context(progress=ArtifactProgress())
 
 
 def _logger() -> logging.Logger | logging.LoggerAdapter:

@@ -77,3 +77,31 @@ def test_disabled_materials_are_not_ranked_and_lend_no_substance_mass() -> None:
     head = np.array([0.1, 0.28, 0.34, 0.28])
     policy = RankingPolicy(POLICY.materials, POLICY.material_substances, enabled=frozenset({4, 9}))
     assert ids(PartEvidence(head), policy) == [9, 4]  # 12 gone; wood's mass is 4's alone, fabric wins
+
+
+def test_the_posterior_normalises_scores_over_enabled_materials() -> None:
+    """Scores are products of experts (tiny); the posterior is the same order summing to 1 over enabled ones."""
+    substance = np.zeros(len(SUBSTANCE_LABELS))
+    substance[SUBSTANCE_LABELS.index("wood")], substance[SUBSTANCE_LABELS.index("fabric")] = 0.9, 0.1
+    head = np.array([0.7, 0.1, 0.15, 0.05])  # scores 0.09, 0.015, 0.045: sum 0.15
+    ranked = rank_part(PartEvidence(head, substance), POLICY, 3).materials
+    assert [r.posterior for r in ranked] == pytest.approx([0.6, 0.3, 0.1])
+    assert sum(r.posterior for r in ranked) == pytest.approx(1.0)
+    only = RankingPolicy((4, 9, 12), ("wood", "fabric", "wood"), substance_first=False, enabled=frozenset({4, 9}))
+    kept = rank_part(PartEvidence(head, substance), only, 3).materials
+    assert {r.material_id: r.posterior for r in kept} == pytest.approx({4: 0.09 / 0.105, 9: 0.015 / 0.105})
+    vetoed = rank_part(PartEvidence(head, color_weights=np.zeros(3)), only, 3).materials
+    assert [r.posterior for r in vetoed] == pytest.approx([0.5, 0.5])  # no evidence left: uniform, not certain
+
+
+def test_reliability_bins_and_ece() -> None:
+    from photoshape_flow.classify.reliability import reliability
+
+    # 0.9-confident and right 9 of 10 times, 0.55-confident and right half the time: ECE 0.05 * 10/20
+    conf = np.array([0.9] * 10 + [0.55] * 10)
+    hit = np.array([True] * 9 + [False] + [True] * 5 + [False] * 5)
+    out = reliability(conf, hit)
+    assert [(b["lo"], b["count"], b["accuracy"]) for b in out.bins] == [(0.5, 10, 0.5), (0.9, 10, 0.9)]
+    assert out.ece == pytest.approx(0.025) and out.accuracy == pytest.approx(0.7)
+    assert reliability(np.array([1.0]), np.array([True])).ece == 0.0  # 1.0 falls in the last bin
+    assert reliability(np.array([]), np.array([])).ece is None

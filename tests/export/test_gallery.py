@@ -121,3 +121,15 @@ def test_gallery_links_only_web_urls_and_escapes_text(tmp_path):
     assert "&lt;script&gt;alert(&#34;shape&#34;)&lt;/script&gt;" in pages["index.html"]
     assert "&lt;img src=x onerror=alert(1)&gt;" in pair and "me\\u202egnp.exe" in pair
     assert "m0&lt;svg onload=alert(1)&gt;" in materials_page and "x&#34; onmouseover=&#34;alert(1)" in materials_page
+
+
+def test_a_part_shows_its_posterior_not_the_raw_score(tmp_path):
+    """The raw score (a product of experts, 0.03) means nothing to a reader; the posterior (0.82) does."""
+    part = GalleryPart(1, "seat", 10, "oak_01", "wood", 0.03, posterior=0.82)
+    baseline = GalleryPart(2, "leg", 11, "steel", "metal", 0.4)  # baselines have no posterior: their score
+    entry = GalleryEntry(pair_id=1, method_key="classifier:1", shape_name="c", exemplar_name="e",
+                         parts=[part, baseline])
+    assert part.confidence == 0.82 and baseline.confidence == 0.4 and entry.score == pytest.approx(0.61)
+    write_gallery(tmp_path / "site", [entry], [])
+    page = (tmp_path / "site" / "pairs" / "1-classifier-1.html").read_text()
+    assert "82.0%" in page and "40.0%" in page and "3.0%" not in page

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 import sqlalchemy as sa
 from tests.conftest import data_root_with_inbox
+from tests.db.test_data_model_doc import doc_queries
 
 pytestmark = [pytest.mark.prefect, pytest.mark.slow, pytest.mark.render]
 
@@ -69,6 +70,8 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
     assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
                                        "training-renders", "training", "inference", "publish"]
     assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-progress"} <= keys
+    # the loops inside the tasks report their item counts too (the CLI's progress, as artifacts)
+    assert data["fine-alignment-pairs-items"] == 100.0 and data["publish-pairs-items"] == 100.0, sorted(keys)
     # nothing is pending after a finished run: publish counts only pairs up to the tiny profile's max_rank
     assert {p.stage: p.pending for p in finished} == dict.fromkeys(result["seconds"], 0)
     renders = {p.stage: p for p in finished}["training-renders"]
@@ -84,12 +87,20 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
             "SELECT COUNT(*) FROM assignment WHERE method = 'classifier' AND NOT unobserved "
             "AND json_extract(params, '$.color_likelihood') IS NOT NULL")).scalar_one()
         network = session.execute(sa.select(m.Classifier).where(m.Classifier.kind == "substance")).scalar_one()
+        # the documented headline query finds PhotoShapes on the tiny demo: it thresholds the posterior
+        confident = session.execute(sa.text(doc_queries()[0])).all()
+        posterior_sums = session.execute(sa.text(
+            "SELECT SUM(posterior) FROM assignment WHERE method = 'classifier' GROUP BY pair_id, part_id")).scalars()
+        material = session.execute(sa.select(m.Classifier).where(m.Classifier.kind == "material")).scalar_one()
         photoshape_renders = session.execute(
             sa.select(sa.func.count()).select_from(m.Rendering).where(m.Rendering.kind == "photoshape")
         ).scalar_one()
     for stage in ("coarse-alignment", "fine-alignment", "substances", "inference"):
         assert progress[stage].done > 0 and progress[stage].pending == 0, stage
     assert candidates > 0 and photoshape_renders > 0
+    assert confident, "no PhotoShape whose every part has posterior >= 0.5"
+    assert all(0.0 < v <= 1.0 + 1e-9 for v in posterior_sums)
+    assert 0.0 <= material.metrics["posterior_ece"] <= 1.0 and material.metrics["posterior_reliability"]["regions"] > 0
     assert colour_ranked > 0  # observed parts ranked with the colour likelihood fit on validation renders
     # the substance confidence's part-level temperature, fit on the network's validation renders
     assert network.metrics["part_temperature_parts"] >= 0 and "part_temperature" in network.metrics

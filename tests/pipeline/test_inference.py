@@ -163,6 +163,13 @@ def test_a_part_smaller_than_any_training_region_is_ranked_without_the_head(  # 
     assert "classifier_head" not in seat.params
     # without the (random) head, the substance network (wood 0.8) and the brown colour decide
     assert legs.material_id == aligned_pair["walnut"]
+    # every ranked row carries its posterior: per part they sum to 1 (top_k 5 >= the 4 materials)
+    with session_scope() as session:
+        sums = dict(session.execute(sa.select(m.Assignment.part_id, sa.func.sum(m.Assignment.posterior))
+                                    .where(m.Assignment.method == "classifier").group_by(m.Assignment.part_id)).all())
+    assert {aligned_pair["legs"], aligned_pair["seat"]} <= sums.keys() and all(
+        v == pytest.approx(1.0) for v in sums.values()), sums
+    assert legs.posterior is not None and legs.posterior > legs.score  # normalised: above the raw product
 
 
 def test_a_part_smaller_than_any_training_region_takes_the_substance_networks_substance(  # type: ignore[no-untyped-def]

@@ -21,6 +21,7 @@ def test_ingest_commands(db_url: str, tmp_path: Path) -> None:
     result = runner.invoke(app, ["ingest", "shapes", str(tmp_path / "shapes"), "--category", "chair", "--no-isolate"])
     assert result.exit_code == 2, result.output  # a rejection fails the command
     assert "ingest shapes" in result.output and "already present" in result.output
+    assert "ingest shapes: 2/2 (100%)" in result.output  # progress as plain lines: the runner is no terminal
     flat = " ".join(result.output.split())
     assert "broken.obj: no faces" in result.output.replace("\n", "")
     # how many, and where the reasons are: the lines above and the table's rows

@@ -210,6 +210,7 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     # every candidate: the broken one is reported, the good one still written
     result = runner.invoke(app, ["export", "--out", str(tmp_path / "all"), "--format", "glb"])
     assert result.exit_code == 1 and "missing" in result.output
+    assert "export pairs: 2/2 (100%)" in result.output  # progress (plain lines: the runner is no terminal)
     assert (tmp_path / "all" / folder.name / "photoshape.glb").is_file()
     bad = runner.invoke(app, ["export", "--out", str(out), "--format", "glb,fbx"])
     assert bad.exit_code == 1 and "unknown export format(s) fbx; valid: glb, gltf, xml, obj" in bad.output
@@ -282,7 +283,7 @@ def test_grade_belongs_to_the_photoshape_it_was_given_to(db_url, store, tmp_path
     new_key = f"classifier:{_rerank_with_a_new_classifier(db_url, good)}"
 
     result = runner.invoke(app, ["gallery", str(tmp_path / "site")])
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 0 and "gallery candidates: 2/2 (100%)" in result.output, result.output
     page = (tmp_path / "site" / "pairs" / f"{good}-{new_key.replace(':', '-')}.html").read_text()
     assert "ungraded" in page and "seat too red" not in page and "wrong_color</span>" not in page
     with session_scope(db_url) as s:

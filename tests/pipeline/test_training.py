@@ -154,6 +154,7 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
     ranked = payload["regions"][0]["materials"]
     assert len(ranked) == 2 and {r["name"] for r in ranked} <= set(TOY)
     assert ranked[0]["score"] >= ranked[1]["score"]
+    assert 0.0 < ranked[1]["posterior"] and ranked[0]["posterior"] + ranked[1]["posterior"] <= 1.0 + 1e-9
     assert payload["color_sigma"] is None  # the materials have no colour yet: no colour likelihood
 
     # with the materials' colours known, the training stage's calibration fits sigma on the val renders;
@@ -167,7 +168,12 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
                             .values(params={"albedo": [c / 255 for c in colour]}))
     args = ["retrieve", str(tmp_path / "photo.png"), "--mask", str(tmp_path / "mask.png"), "--json"]
     assert json.loads(runner.invoke(app, args).output)["color_sigma"] is None  # not calibrated yet: not fitted
-    fitted = calibrate(get_settings(), classifier_id)["color_sigma"]
+    calibration = calibrate(get_settings(), classifier_id)
+    fitted = calibration["color_sigma"]
+    # the calibration check: the posterior's reliability on the validation renders' regions
+    check = calibration["posterior"]
+    assert check["regions"] > 0 and 0.0 <= check["ece"] <= 1.0 and 0.0 < check["mean_posterior"] <= 1.0
+    assert sum(b["count"] for b in check["bins"]) == check["regions"]
     coloured = json.loads(runner.invoke(app, args).output)
     assert 1.0 <= coloured["color_sigma"] < 20 and coloured["color_sigma"] == pytest.approx(fitted)
     assert coloured["regions"][0]["materials"][0]["material_id"] == int(id_map.max())
@@ -175,6 +181,7 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
     with session_scope(db_url) as session:
         cached = dict(session.get(Classifier, classifier_id).metrics)
     assert cached["color_sigma"] == pytest.approx(coloured["color_sigma"])
+    assert cached["posterior_ece"] == check["ece"] and cached["posterior_reliability"] == check
     assert calibrate(get_settings(), classifier_id)["color_sigma"] == fitted  # cached: not refit
     with session_scope(db_url) as session:
         assert session.get(Classifier, classifier_id).metrics["color_sigma_key"] == cached["color_sigma_key"]

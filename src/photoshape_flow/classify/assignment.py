@@ -29,6 +29,7 @@ class RankedMaterial:
     material_id: int
     substance: str
     score: float
+    posterior: float | None = None  # the ranking's posterior over enabled materials (ours only)
 
 
 def substance_vector(probs: Mapping[str, float] | None) -> np.ndarray:

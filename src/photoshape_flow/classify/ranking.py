@@ -9,6 +9,12 @@ evidence of a region (`PartEvidence`) is multiplied as a product of experts:
   validation renders (`classify.substance_calibration`; the caller passes the tempered vector);
 - the colour likelihood of the region's median colour under each material (`classify.color_prior`).
 
+The product is an unnormalised posterior: its values are tiny (three factors below 1) and mean
+nothing on their own, so each ranked material also carries its `posterior`, the score divided by
+the sum over every enabled material (`posterior`), which a user can threshold ("every part at
+least 0.5") and whose reliability the training stage measures on validation renders
+(`pipeline.calibration.posterior_reliability`).
+
 The first material is then taken from the substance with the most ranking mass, the rest follow by
 score (`substance_first_order`). A region smaller than the classifier's smallest training region is
 ranked without the head (it never saw such masks: its output there is noise) and takes the
@@ -37,6 +43,7 @@ class Ranked:
     substance: str
     score: float  # the product of the evidence used (the order's key, except for the substance-first pick)
     probability: float  # the material head's softmax probability (its evidence alone)
+    posterior: float  # the score normalised over every enabled material of the policy (they sum to 1)
 
 
 @dataclass(frozen=True)
@@ -115,6 +122,28 @@ def scores(policy: RankingPolicy, evidence: PartEvidence) -> np.ndarray:
     return out
 
 
+def enabled_mask(policy: RankingPolicy) -> np.ndarray:
+    """True for each material of the policy that may be ranked."""
+    if policy.enabled is None:
+        return np.ones(len(policy.materials), bool)
+    return np.array([mid in policy.enabled for mid in policy.materials], bool)
+
+
+def posterior(policy: RankingPolicy, values: np.ndarray) -> np.ndarray:
+    """`values` (the scores) normalised to a distribution over the enabled materials, summing to 1.
+
+    Disabled materials get 0. When no enabled material has a positive finite score (every expert
+    vetoed them all) the posterior is uniform over the enabled ones: it says "no idea", not "certain".
+    """
+    allowed = enabled_mask(policy)
+    raw = np.asarray(values, np.float64)
+    masked = np.where(allowed & np.isfinite(raw), np.clip(raw, 0.0, None), 0.0)
+    total = float(masked.sum())
+    if total > 0.0:
+        return masked / total
+    return allowed / max(int(allowed.sum()), 1)
+
+
 def rank_part(evidence: PartEvidence, policy: RankingPolicy, k: int) -> RankedPart:
     """The k best materials for one region under the policy, best first."""
     small = (evidence.region_fraction is not None and evidence.material_probs is not None
@@ -131,9 +160,10 @@ def rank_part(evidence: PartEvidence, policy: RankingPolicy, k: int) -> RankedPa
     else:
         order = np.argsort(-values, kind="stable")
     head = np.asarray(evidence.material_probs)[1:] if evidence.material_probs is not None else None
+    normalised = posterior(policy, values)
     ranked = [
         Ranked(policy.materials[i], policy.material_substances[i], float(values[i]),
-               float(head[i]) if head is not None else 1.0)
+               float(head[i]) if head is not None else 1.0, float(normalised[i]))
         for i in order if policy.enabled is None or policy.materials[i] in policy.enabled
     ]
     return RankedPart(ranked[: max(0, k)], head_used=not small)
@@ -143,5 +173,5 @@ def _allowed(policy: RankingPolicy, color_weights: np.ndarray | None) -> np.ndar
     """Colour weights with disabled materials zeroed (they lend no substance mass either)."""
     if policy.enabled is None:
         return color_weights
-    allowed = np.array([1.0 if mid in policy.enabled else 0.0 for mid in policy.materials])
+    allowed = enabled_mask(policy).astype(np.float64)
     return allowed if color_weights is None else np.asarray(color_weights) * allowed

@@ -8,6 +8,7 @@ from enum import StrEnum
 import typer
 
 from photoshape_flow.cli.common import console, fail, setup_logging, shown_database_url
+from photoshape_flow.cli.progress import cli_progress
 
 
 class DemoSize(StrEnum):
@@ -53,17 +54,19 @@ def demo(
         roots={name: [manifest.root / name] for name in COLLECTIONS}, source=source, license="CC0-1.0",
         attribution=f"photoshape_flow demo generator (procedural, seed {manifest.seed})",
     )
-    ctx, profile = stage_context(), resolve_profile(size.value)
+    profile = resolve_profile(size.value)
     announce = lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")  # noqa: E731
-    if prefect:
-        from photoshape_flow.flows.pipeline import photoshape_pipeline
+    with cli_progress(console) as progress:
+        ctx = stage_context(progress=progress)
+        if prefect:
+            from photoshape_flow.flows.pipeline import photoshape_pipeline
 
-        reports = run_reporting_blocked(lambda: run_all(profile, ctx, names=["ingest"], ingest=request, origin="demo",
-                                                        on_stage=announce, wait=wait))
-        photoshape_pipeline(profile=size.value, stages=[s for s in STAGE_NAMES if s != "ingest"])
-    else:
-        reports = run_reporting_blocked(lambda: run_all(profile, ctx, ingest=request, origin="demo",
-                                                        on_stage=announce, wait=wait))
+            reports = run_reporting_blocked(lambda: run_all(profile, ctx, names=["ingest"], ingest=request,
+                                                            origin="demo", on_stage=announce, wait=wait))
+            photoshape_pipeline(profile=size.value, stages=[s for s in STAGE_NAMES if s != "ingest"])
+        else:
+            reports = run_reporting_blocked(lambda: run_all(profile, ctx, ingest=request, origin="demo",
+                                                            on_stage=announce, wait=wait))
     print_reports(reports)
     if evaluate:
         from photoshape_flow.pipeline.evaluate import run_evaluation

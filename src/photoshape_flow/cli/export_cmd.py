@@ -8,7 +8,8 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, require_database, shown
+from photoshape_flow.cli.common import console, err_console, fail, require_database, shown
+from photoshape_flow.cli.progress import cli_progress
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, parse_formats
 
 
@@ -36,7 +37,8 @@ def export(
         chosen = parse_formats(formats)
     except ValueError as exc:
         fail(str(exc))
-    results = export_candidates(out, pair_ids or None, method, chosen, size=size, spp=spp)
+    with cli_progress(console if not as_json else err_console) as progress:
+        results = export_candidates(out, pair_ids or None, method, chosen, size=size, spp=spp, progress=progress)
     if not results:
         fail(f"no candidates for method {method!r}: run inference first (photoshape run inference)")
     if as_json:

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from photoshape_flow.cli.common import console, fail, require_database
+from photoshape_flow.cli.progress import cli_progress
 
 
 def gallery(
@@ -23,7 +24,8 @@ def gallery(
     require_database()
     from photoshape_flow.pipeline.gallery_site import write_contact_sheet, write_gallery_site
 
-    site = write_gallery_site(out, method)
+    with cli_progress(console) as progress:
+        site = write_gallery_site(out, method, progress=progress)
     console.print(f"gallery: {site.published} published PhotoShape(s); {site.waiting} candidate(s) without a "
                   f"render on {site.index.parent / 'candidates.html'}; open {site.index}", highlight=False)
     if sheet is not None:

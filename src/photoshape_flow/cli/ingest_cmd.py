@@ -19,6 +19,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from photoshape_flow.cli.common import console, err_console, fail, require_database, shown
+from photoshape_flow.cli.progress import cli_progress
 
 ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps.", no_args_is_help=True)
 
@@ -58,6 +59,11 @@ def _start(verbose: bool, split: str | None = None) -> None:
 
 @contextmanager
 def _progress(title: str) -> Iterator[Callable[[str, int, int], None]]:
+    """A bar naming the file at hand on a terminal; otherwise the CLI's plain count/rate/ETA lines."""
+    if not console.is_terminal:
+        with cli_progress(console) as sink:
+            yield lambda _label, done, total: sink(f"ingest {title}", done, total)
+        return
     bar = Progress(
         TextColumn(f"[bold]{title}[/]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
         TextColumn("{task.description}"), console=console, transient=True,

@@ -103,7 +103,8 @@ def retrieve(
             "regions": [
                 {"mask": str(path), "materials": [
                     {"rank": i + 1, "material_id": r.material_id, "name": names.get(r.material_id),
-                     "substance": r.substance, "score": r.score, "probability": r.probability}
+                     "substance": r.substance, "score": r.score, "posterior": r.posterior,
+                     "probability": r.probability}
                     for i, r in enumerate(regions)
                 ]}
                 for path, regions in zip(mask, ranked, strict=True)
@@ -115,11 +116,11 @@ def retrieve(
     console.print(f"classifier {row.id} ({row.name}, {row.architecture}){colour_note}", highlight=False)
     for path, regions in zip(mask, ranked, strict=True):
         table = Table(title=f"{path.name}")
-        for column in ("rank", "material", "substance", "score", "p(material)"):
-            table.add_column(column, justify="right" if column in ("rank", "score", "p(material)") else "left")
+        for column in ("rank", "material", "substance", "posterior", "score", "p(material)"):
+            table.add_column(column, justify="left" if column in ("material", "substance") else "right")
         for i, r in enumerate(regions, start=1):
             table.add_row(str(i), shown(names.get(r.material_id, f"#{r.material_id}")), r.substance,
-                          f"{r.score:.4f}", f"{r.probability:.4f}")
+                          f"{r.posterior:.3f}", f"{r.score:.4f}", f"{r.probability:.4f}")
         console.print(table)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from functools import reduce
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -16,6 +17,7 @@ from photoshape_flow.cli.common import (
     resolve_profile_or_fail,
     setup_logging,
 )
+from photoshape_flow.cli.progress import cli_progress
 from photoshape_flow.profiles import PROFILES
 
 BLOCKED_EXIT_CODE = 3  # another live worker holds items this run needed (see `photoshape status`)
@@ -24,14 +26,26 @@ if TYPE_CHECKING:  # the registry imports the ORM: loaded when a command runs, n
     from photoshape_flow.stages import StageReport
 
 
+SUMMARY_COLUMNS = ("stage", "done", "skipped", "failed", "rejected", "blocked", "seconds")
+
+
+def report_row(r: StageReport) -> tuple[str, ...]:
+    """A report's cells: counts and seconds only, so no JSON ever lands in a cell."""
+    return (r.stage, str(r.done), str(r.skipped), str(r.failed), str(r.rejected), str(r.blocked.count),
+            f"{r.seconds:.1f}")
+
+
 def print_reports(reports: Sequence[StageReport], title: str = "stages run") -> None:
-    """One row per stage: counts and seconds (details stay in the `pipeline_run` row)."""
+    """One row per stage plus a total: counts and seconds (details stay in the `pipeline_run` row)."""
     table = Table(title=title)
-    for column in ("stage", "done", "skipped", "failed", "rejected", "blocked", "seconds"):
+    for column in SUMMARY_COLUMNS:
         table.add_column(column, justify="left" if column == "stage" else "right")
     for r in reports:
-        table.add_row(r.stage, str(r.done), str(r.skipped), str(r.failed), str(r.rejected), str(r.blocked.count),
-                      f"{r.seconds:.1f}")
+        table.add_row(*report_row(r))
+    if len(reports) > 1:
+        total = reduce(lambda a, b: a.merge(b), reports)
+        table.add_section()
+        table.add_row("total", *report_row(total)[1:], style="bold")
     console.print(table)
 
 
@@ -89,12 +103,14 @@ def run(
                 console.print(f"{path} = {value}", highlight=False)
         return
     require_database()
-    if pairs:
-        print_reports([publish_pairs(resolved, stage_context(), pairs)], title="pairs published")
-        return
-    reports = run_reporting_blocked(lambda: run_all(
-        resolved, stage_context(), names=None if stage == "all" else [stage], wait=wait,
-        on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")))
+    with cli_progress(console) as progress:
+        ctx = stage_context(progress=progress)
+        if pairs:
+            print_reports([publish_pairs(resolved, ctx, pairs)], title="pairs published")
+            return
+        reports = run_reporting_blocked(lambda: run_all(
+            resolved, ctx, names=None if stage == "all" else [stage], wait=wait,
+            on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")))
     print_reports(reports)
 
 

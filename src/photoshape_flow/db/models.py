@@ -331,6 +331,9 @@ class Assignment(TimestampMixin, ParamsHashMixin, Base):
     rank: Mapped[int] = mapped_column(default=1)
     material_id: Mapped[int | None] = mapped_column(_fk("material.id"), index=True)
     score: Mapped[float | None]
+    posterior: Mapped[float | None] = mapped_column(
+        comment="score normalised over every enabled material of the part (sums to 1); NULL: baselines"
+    )
     substance: Mapped[str | None] = mapped_column(Short)
     unobserved: Mapped[bool] = mapped_column(default=False, comment="part not visible: chosen by substance prior")
     params: Mapped[dict[str, Any]] = mapped_column(default=dict, comment="uv scale/rotation/offset used")

@@ -1,7 +1,9 @@
 """SQL views. `photoshape_candidate`: pairs with their top-ranked assignment per part.
 
 One row per (pair, part, method_key): filter on `method` (classifier or a baseline name) or on
-`classifier_id`. Excluded pairs, shapes and exemplars are left out.
+`classifier_id`. `posterior` is the part's score normalised over all enabled materials (what a
+threshold such as "every part at least 0.5" should use); `score` the raw product of experts.
+Excluded pairs, shapes and exemplars are left out.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ SELECT
     m.name          AS material_name,
     COALESCE(m.substance, a.substance) AS substance,
     a.score         AS score,
+    a.posterior     AS posterior,
     a.unobserved    AS unobserved,
     al.iou_crf      AS alignment_iou
 FROM pair p

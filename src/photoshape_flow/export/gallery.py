@@ -53,6 +53,12 @@ class GalleryPart:
     substance: str | None
     score: float | None
     unobserved: bool = False
+    posterior: float | None = None  # the ranking's posterior (ours); None for the baselines
+
+    @property
+    def confidence(self) -> float | None:
+        """What the gallery shows as the part's confidence: the posterior, else the method's own score."""
+        return self.posterior if self.posterior is not None else self.score
 
 
 @dataclass
@@ -93,9 +99,9 @@ class GalleryEntry:
 
     @property
     def score(self) -> float | None:
-        """Mean rank-1 confidence over the parts seen in the exemplar (all parts when none was)."""
-        seen = [p.score for p in self.parts if p.score is not None and not p.unobserved]
-        values = seen or [p.score for p in self.parts if p.score is not None]
+        """Mean rank-1 confidence (posterior) over the parts seen in the exemplar (all parts when none was)."""
+        seen = [p.confidence for p in self.parts if p.confidence is not None and not p.unobserved]
+        values = seen or [p.confidence for p in self.parts if p.confidence is not None]
         return sum(values) / len(values) if values else None
 
     @property

@@ -8,6 +8,11 @@ Two numbers make the product of experts in `classify.ranking` weigh its experts 
 - each substance network's part-level temperature (`pipeline.substances.substance_temperature`),
   fit on the validation renders of both rounds and cached in that network's `metrics`.
 
+Then it checks the result: `posterior_reliability` ranks the material regions of the validation
+renders through `classify.ranking` and compares the top material's posterior with how often it
+is right (reliability bins and ECE, cached in the classifier's `metrics` as `posterior_ece` and
+`posterior_reliability`), so a user knows what a threshold on `assignment.posterior` means.
+
 The training stage fits both once its classifier exists (the temperature needs the training round's
 validation renders too); inference and `photoshape retrieve` only read them, so ranking never
 re-reads hundreds of renders and two workers never race to fit the same number.
@@ -24,7 +29,13 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.assignment import foreground_of_render, median_lab
-from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.classify.color_prior import (
+    color_likelihood,
+    fit_color_sigma,
+    material_lab_matrix,
+    region_color_distances,
+)
+from photoshape_flow.classify.ranking import PartEvidence, rank_part
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -34,6 +45,7 @@ from photoshape_flow.store import BlobStore
 log = logging.getLogger(__name__)
 
 COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
+POSTERIOR_RENDERS = 200  # validation renders whose regions measure the posterior's reliability
 
 
 def fit_classifier_color_sigma(
@@ -126,4 +138,81 @@ def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
         sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
         networks = substance_networks(session)
     temperatures = {str(n): substance_temperature(settings, n) for n in networks}
-    return {"color_sigma": sigma, "substance_temperatures": temperatures}
+    return {"color_sigma": sigma, "substance_temperatures": temperatures,
+            "posterior": posterior_reliability(settings, classifier_id)}
+
+
+def posterior_reliability(settings: Settings, classifier_id: int, limit: int = POSTERIOR_RENDERS) -> dict[str, Any]:
+    """Reliability of the ranking's posterior on the validation renders' material regions (cached).
+
+    Each region (at least the classifier's smallest training region) is ranked as inference ranks an
+    observed part: the material head, the colour likelihood with the stored sigma, and as substance
+    evidence the classifier's own substance head (the substance network is not re-run on renders).
+    The top material's posterior against whether it is the region's true material gives the bins
+    and the ECE (`classify.reliability`), stored in the classifier's `metrics` and keyed by the
+    checkpoint, the renders and the sigma, so a re-run of training that changes none reads them back.
+    """
+    from photoshape_flow.classify.reliability import reliability
+    from photoshape_flow.pipeline.training import load_material_classifier, training_data
+
+    store = BlobStore(settings.blob_root)
+    url = settings.resolved_database_url
+    row, model = load_material_classifier(classifier_id, settings)
+    config = row.config or {}
+    with session_scope(url) as session:
+        data = training_data(session, store)
+        classifier = session.get(m.Classifier, classifier_id)
+        assert classifier is not None
+        metrics = dict(classifier.metrics or {})
+        key = stable_hash({"checkpoint": row.checkpoint_blob, "renders": data.hash, "limit": limit,
+                           "sigma": metrics.get("color_sigma")})
+        if metrics.get("posterior_key") == key and "posterior_reliability" in metrics:
+            return dict(metrics["posterior_reliability"])
+        prior = stored_color_prior(session, store, model.materials, classifier)
+        enabled = frozenset(session.execute(sa.select(m.Material.id).where(m.Material.enabled)).scalars())
+    policy = model.policy(float(config.get("min_region_fraction", 0.0)), enabled=enabled)
+    confidence, correct = _ranked_regions(model, policy, data.val[:limit], prior, bool(config.get("frame_object")))
+    result = reliability(np.asarray(confidence), np.asarray(correct)).to_dict()
+    log.info("classifier %d: posterior ECE %s on %d validation regions (accuracy %s, mean posterior %s)",
+             classifier_id, result["ece"], result["regions"], result["accuracy"], result["mean_posterior"])
+    with session_scope(url) as session:
+        classifier = session.get(m.Classifier, classifier_id)
+        if classifier is not None and classifier.checkpoint_blob == row.checkpoint_blob:
+            classifier.metrics = {**(classifier.metrics or {}), "posterior_ece": result["ece"],
+                                  "posterior_reliability": result, "posterior_key": key}
+    return result
+
+
+def _ranked_regions(model: Any, policy: Any, items: Sequence[Any], prior: tuple[np.ndarray, float] | None,
+                    framed: bool) -> tuple[list[float], list[bool]]:
+    """(top posterior, right?) of every large-enough material region of `items`; unreadable renders skipped."""
+    from photoshape_flow.classify.dataset import frame_object, load_label_map, load_rgb
+
+    confidence: list[float] = []
+    correct: list[bool] = []
+    known = set(model.materials)
+    for item in items:
+        try:
+            image, ids = load_rgb(item.image), load_label_map(item.material_map)
+        except (OSError, ValueError) as exc:
+            log.warning("%s: %s; not used for the posterior check", item.key, exc)
+            continue
+        if framed:
+            image, ids = frame_object(image, ids)
+        minimum = max(16, int(np.ceil(policy.min_region_fraction * ids.size)))
+        values, counts = np.unique(ids, return_counts=True)
+        regions = [int(v) for v, n in zip(values.tolist(), counts.tolist(), strict=True)
+                   if v in known and (policy.enabled is None or v in policy.enabled) and n >= minimum]
+        if not regions:
+            continue
+        masks = [ids == v for v in regions]
+        mats, subs = model.predict(image, masks)
+        for i, (material, mask) in enumerate(zip(regions, masks, strict=True)):
+            colors = color_likelihood(median_lab(image, mask), *prior) if prior is not None else None
+            evidence = PartEvidence(material_probs=mats[i], substance_weights=subs[i], color_weights=colors,
+                                    region_fraction=float(mask.sum()) / mask.size)
+            top = rank_part(evidence, policy, 1).materials
+            if top:
+                confidence.append(top[0].posterior)
+                correct.append(top[0].material_id == material)
+    return confidence, correct

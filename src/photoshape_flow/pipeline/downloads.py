@@ -27,6 +27,7 @@ from photoshape_flow.pipeline.photoshapes import (
     load_photoshape,
     render_key,
 )
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -79,6 +80,7 @@ def export_candidates(
     *,
     size: int | None = None,
     spp: int | None = None,
+    progress: Progress | None = None,
 ) -> list[dict[str, Any]]:
     """Write each candidate's downloads into ``out_dir/<pair_id>-<method_key>/``; one result per item.
 
@@ -101,7 +103,7 @@ def export_candidates(
         {"pair_id": p, "method_key": None, "status": STATUS_FAILED, "error": f"pair {p}: not a candidate for "
          f"{method or DEFAULT_METHOD} (no rank-1 assignments, or excluded)", "files": {}} for p in missing
     ]
-    for pair_id, method_key in todo:
+    for pair_id, method_key in counted(progress, "export pairs", todo):
         result: dict[str, Any] = {"pair_id": pair_id, "method_key": method_key, "files": {}}
         try:
             with session_scope(url) as session:

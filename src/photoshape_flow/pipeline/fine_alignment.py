@@ -35,6 +35,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.demo.groundtruth import exemplar_records, record_field, record_for_source, record_mask
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -166,6 +167,7 @@ def run_fine_alignment(
     renderer: Any = None,
     limit: int | None = None,
     retry_failed: bool = False,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """Fine-align pending pairs (all active pairs, or those in `pair_ids`); returns a summary.
 
@@ -198,7 +200,7 @@ def run_fine_alignment(
     meshes = _MeshCache(store)
     ious: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
     seconds: list[float] = []
-    for item in pending:
+    for item in counted(progress, "fine-alignment pairs", pending):
         try:
             columns = _align_item(item, params, store, renderer, meshes)
         except Exception as exc:  # one bad pair must not stop the batch

@@ -19,12 +19,13 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.grading import current_grades
 from photoshape_flow.pipeline.photoshapes import candidate_method_keys, provenance
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 
 def gallery_data(session: Session, store: BlobStore, method: str | None = None,
-                 settings: Settings | None = None) -> tuple[list[Any], list[Any]]:
+                 settings: Settings | None = None, progress: Progress | None = None) -> tuple[list[Any], list[Any]]:
     """`GalleryEntry` per candidate of `method` and `GalleryMaterial` per material they use."""
     from photoshape_flow.export.gallery import GalleryEntry, GalleryMaterial, GalleryPart
 
@@ -39,7 +40,7 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
     used: set[int] = set()
     candidates = candidate_method_keys(session, method)
     grades = current_grades(session, candidates)  # grades of what each PhotoShape shows now
-    for pair_id, method_key in candidates:
+    for pair_id, method_key in counted(progress, "gallery candidates", candidates):
         pair = session.get(m.Pair, pair_id)
         shape, exemplar = session.get(m.Shape, pair.shape_id), session.get(m.Exemplar, pair.exemplar_id)
         rows = session.execute(
@@ -53,7 +54,8 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
             GalleryPart(index=part.index, name=part.name, material_id=mat.id if mat else None,
                         material_name=mat.name if mat else None,
                         substance=(a.substance if a else None) or (mat.substance if mat else None),
-                        score=a.score if a else None, unobserved=bool(a.unobserved) if a else False)
+                        score=a.score if a else None, unobserved=bool(a.unobserved) if a else False,
+                        posterior=a.posterior if a else None)
             for part, a, mat in rows
         ]
         used.update(p.material_id for p in parts if p.material_id is not None)
@@ -110,14 +112,14 @@ class GallerySite(NamedTuple):
 
 
 def write_gallery_site(out_dir: str | Path, method: str | None = None,
-                       settings: Settings | None = None) -> GallerySite:
+                       settings: Settings | None = None, progress: Progress | None = None) -> GallerySite:
     """Gather the candidates from the database and write the static gallery."""
     from photoshape_flow.export.gallery import write_gallery
 
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
     with session_scope(settings.resolved_database_url) as session:
-        entries, materials = gallery_data(session, store, method, settings)
+        entries, materials = gallery_data(session, store, method, settings, progress)
     index = write_gallery(out_dir, entries, materials)
     published = sum(entry.published for entry in entries)
     return GallerySite(index, published, len(entries) - published)

@@ -49,6 +49,7 @@ from photoshape_flow.pipeline.calibration import (
     stored_temperature,
     substance_networks,
 )
+from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
 from photoshape_flow.vocab import SUBSTANCES
@@ -58,7 +59,7 @@ log = logging.getLogger(__name__)
 METHODS: tuple[str, ...] = ("classifier", "no-classifier", "color-match", "builtin")
 ALIGNMENT_METHOD = "flow-crf"
 # the ranking policy's version: part of every row's params_hash (docs/decisions.md lists each version)
-CODE_VERSION = "inference-8"
+CODE_VERSION = "inference-9"
 # No jitter at publication: the material's own scale through the texture-scale formula.
 IDENTITY_UV = {"scale": 1.0, "rotation": 0.0, "offset": [0.0, 0.0]}
 
@@ -274,7 +275,7 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
                            else substance_vector(None))
     ranked = rank_part(evidence, ctx.policy, ctx.top_k)
     item.head = ranked.head_used
-    return [RankedMaterial(r.material_id, r.substance, r.score) for r in ranked.materials]
+    return [RankedMaterial(r.material_id, r.substance, r.score, r.posterior) for r in ranked.materials]
 
 
 def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, params_hash: str) -> int:
@@ -335,7 +336,8 @@ def infer_pair(session: Session, ctx: _Context, pair: m.Pair, method_key: str, p
                 rows.append(m.Assignment(
                     pair_id=pair.id, part_id=item.part.id, method=ctx.method, method_key=method_key,
                     classifier_id=ctx.classifier.id if ctx.method == "classifier" and ctx.classifier else None,
-                    rank=rank, material_id=r.material_id, score=r.score, substance=r.substance,
+                    rank=rank, material_id=r.material_id, score=r.score, posterior=r.posterior,
+                    substance=r.substance,
                     unobserved=item.mask is None,
                     params={"part_substance": item.substance.substance,
                             "substance_confidence": item.substance.probs.get(item.substance.substance or "", None),
@@ -360,6 +362,7 @@ def run_inference(
     settings: Settings | None = None,
     color_prior: bool = True,
     calibrate_substances: bool = True,
+    progress: Progress | None = None,
 ) -> InferenceSummary:
     """Write ranked assignments for every pending pair with one method; resumable and idempotent.
 
@@ -381,6 +384,13 @@ def run_inference(
         todo = pending_pairs(session, method_key, expected)
     summary = InferenceSummary(method_key=method_key)
     stage = f"inference:{method_key}"
+    report = progress or no_progress
+
+    def tick() -> None:
+        handled = summary.pairs_done + summary.pairs_skipped + len(summary.pairs_failed)
+        report(f"inference {method_key} pairs", handled, len(todo))
+
+    tick()
     for start in range(0, len(todo), batch_size):
         keys = [str(p) for p in todo[start : start + batch_size]]
         with session_scope(url) as session:
@@ -391,6 +401,7 @@ def run_inference(
             held = claims.live_holds(session, stage, [k for k in keys if k not in mine])
         summary.blocked += held
         summary.pairs_skipped += len(keys) - len(mine) - sum(h.count for h in held)
+        tick()
         for key in mine:
             pair_id = int(key)
             try:
@@ -406,6 +417,7 @@ def run_inference(
                 summary.pairs_failed.append((pair_id, reason))
                 with session_scope(url) as session:
                     claims.fail(session, stage, key, reason)
+            tick()
     log.info("inference %s: %d pairs, %d rows, %d failed", method_key, summary.pairs_done, summary.rows,
              len(summary.pairs_failed))
     return summary

@@ -26,13 +26,15 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.export.text import one_line as text_line
 from photoshape_flow.geometry.archive import ArchiveLimits
+from photoshape_flow.progress_sink import Progress as ProgressSink
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 logger = logging.getLogger(__name__)
 
-Progress = Callable[[str, int, int], None]
-"""progress(label, done, total): called after each item (label names the item just handled)."""
+# progress(label, done, total) after each item: the one progress interface (progress_sink.py), whose
+# task is here the item just handled (the ingest stage re-labels it with its collection)
+Progress = ProgressSink
 
 
 @dataclass

@@ -57,6 +57,7 @@ from photoshape_flow.pipeline.photoshapes import (
     render_key,
     render_seed,
 )
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -104,6 +105,7 @@ def run_publish(
     formats: Sequence[str] = DEFAULT_FORMATS,
     export: bool = True,
     renderer: Any = None,
+    progress: Progress | None = None,
 ) -> PublishSummary:
     """Render and export every candidate of `method` (all pairs, or `pair_ids`); resumable, idempotent."""
     from photoshape_flow.export.bundle import export_photoshape
@@ -128,7 +130,7 @@ def run_publish(
         log.warning("publish: %s", message)
         summary.errors.append(message)
 
-    for pair_id, method_key in todo:
+    for pair_id, method_key in counted(progress, "publish pairs", todo):
         try:
             with session_scope(url) as session:
                 envmap = session.get(m.Envmap, envmap_id) if envmap_id is not None else None

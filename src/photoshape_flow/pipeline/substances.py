@@ -41,6 +41,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.training_renders import run_training_renders
+from photoshape_flow.progress_sink import Progress, counted, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS
 
@@ -96,7 +97,8 @@ def _load_label_map(store: BlobStore, ref: str) -> np.ndarray:
 
 
 def train_or_resume(
-    settings: Settings, train_config: str | SubstanceTrainConfig = "cpu", **overrides: Any
+    settings: Settings, train_config: str | SubstanceTrainConfig = "cpu", *, progress: Progress | None = None,
+    **overrides: Any,
 ) -> tuple[int, Any, dict[str, Any]]:
     """Train the substance network (or resume / reuse it); returns (classifier_id, model, info)."""
 
@@ -150,7 +152,11 @@ def train_or_resume(
         info.update(epochs_run=[], metrics=checkpoint.get("metrics", {}))
         return classifier_id, load_model(checkpoint, device), info
 
+    report = progress or no_progress
+    report("substances network epochs", int(info["resumed_from_epoch"]), config.epochs)
+
     def save(ckpt: dict[str, Any], metrics: dict[str, Any]) -> None:
+        report("substances network epochs", int(ckpt["epoch"]), config.epochs)
         ref = store.put_bytes(checkpoint_to_bytes(ckpt), "pt")
         with session_scope(url) as session:
             session.execute(
@@ -266,7 +272,8 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
 
 
 def assign_part_substances(
-    settings: Settings, classifier_id: int, model: Any, size: int, *, min_pixels: int = 1
+    settings: Settings, classifier_id: int, model: Any, size: int, *, min_pixels: int = 1,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """PartSubstance rows for every pair with an ok flow-crf alignment (skipping up-to-date pairs)."""
     from photoshape_flow.classify.substance_parts import part_substances
@@ -300,7 +307,7 @@ def assign_part_substances(
         ):
             current.setdefault(pair_id, {})[part_id] = params_hash
 
-    for pair_id, shape_id, crf_blob, alignment_hash, image_blob in todo:
+    for pair_id, shape_id, crf_blob, alignment_hash, image_blob in counted(progress, "substances pairs", todo):
         summary["pairs"] += 1
         parts = parts_of.get(shape_id, [])
         params_hash = stable_hash(
@@ -378,19 +385,23 @@ def run_substances(
     *,
     batch: int = 16,
     train_overrides: dict[str, Any] | None = None,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """The whole substances stage: bootstrap renders -> substance network -> PartSubstance rows."""
     settings = settings or get_settings()
-    bootstrap = run_training_renders("bootstrap", bootstrap_count, size, spp, settings, batch=batch)
-    return {"bootstrap": bootstrap, **train_and_assign(settings, size, train_config, train_overrides)}
+    bootstrap = run_training_renders("bootstrap", bootstrap_count, size, spp, settings, batch=batch,
+                                     progress=progress)
+    return {"bootstrap": bootstrap, **train_and_assign(settings, size, train_config, train_overrides, progress)}
 
 
 def train_and_assign(settings: Settings, size: int, train_config: str | SubstanceTrainConfig = "cpu",
-                     train_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+                     train_overrides: dict[str, Any] | None = None,
+                     progress: Progress | None = None) -> dict[str, Any]:
     """The network on the bootstrap renders that exist (trained or resumed), then every part's substance."""
-    classifier_id, model, info = train_or_resume(settings, train_config, **(train_overrides or {}))
+    classifier_id, model, info = train_or_resume(settings, train_config, progress=progress, **(train_overrides or {}))
     predict_size = _config_size(settings, classifier_id) or size
-    return {"network": info, "part_substances": assign_part_substances(settings, classifier_id, model, predict_size)}
+    parts = assign_part_substances(settings, classifier_id, model, predict_size, progress=progress)
+    return {"network": info, "part_substances": parts}
 
 
 def _config_size(settings: Settings, classifier_id: int) -> int | None:

@@ -43,6 +43,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
+from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -220,6 +221,7 @@ def run_training(
     *,
     overrides: dict[str, Any] | None = None,
     kinds: Sequence[str] = TRAINING_KINDS,
+    progress: Progress | None = None,
 ) -> int:
     """Train (or reuse, or resume) the material classifier; returns its `Classifier` id."""
     import torch
@@ -320,6 +322,8 @@ def run_training(
                                 seed=cfg.seed)
 
         current = {"ref": resume_ref}
+        report = progress or no_progress
+        report("training epochs", int(resume["epoch"]) if resume else 0, epochs)
 
         def save(checkpoint: dict[str, Any]) -> None:
             ref = store.put_bytes(ckpt.to_bytes(checkpoint), "pt")
@@ -332,6 +336,7 @@ def run_training(
                 )
             _drop_superseded(store, current["ref"], ref)
             current["ref"] = ref
+            report("training epochs", int(checkpoint["epoch"]), epochs)
 
         started = time.perf_counter()
         result = train_classifier(

@@ -45,6 +45,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
@@ -309,6 +310,7 @@ def run_training_renders(
     saturation_threshold: float = SATURATION_THRESHOLD,
     renderer: Any = None,
     indices: Sequence[int] | None = None,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """Render `count` items of `round` (resumable, idempotent); returns a summary dict.
 
@@ -341,6 +343,13 @@ def run_training_renders(
         "rejected": 0, "failed": 0, "render_seconds": 0.0, "pose_source": pools.pose_source,
         "split_source": pools.split_source, "warnings": list(pools.warnings), "errors": [],
     }
+
+    def tick() -> None:
+        """Items handled so far (rendered, skipped or failed) to the progress sink."""
+        handled = summary["rendered"] + summary["skipped"] + summary["failed"]
+        (progress or no_progress)(f"{round} renders", handled, len(keys))
+
+    tick()
     for start in range(0, len(keys), max(1, batch)):
         chunk = keys[start : start + max(1, batch)]
         with session_scope(url) as session:
@@ -366,6 +375,7 @@ def run_training_renders(
             if existing.get(spec.key, ("", ""))[0] != h or existing[spec.key][1] not in (STATUS_OK, STATUS_REJECTED)
         ]
         summary["skipped"] += len(specs) - len(pending)
+        tick()
         if not pending:
             continue
         if renderer is None:
@@ -397,6 +407,7 @@ def run_training_renders(
                         pair_id=spec.pair_id, envmap_id=spec.envmap.envmap_id, split=spec.split,
                         params_hash=params_hash, status=STATUS_FAILED, error=message[:2000],
                     )
+                tick()
                 continue
             seconds = time.perf_counter() - started
             summary["render_seconds"] += seconds
@@ -430,6 +441,7 @@ def run_training_renders(
                 )
             summary["rendered"] += 1
             summary["rejected"] += int(example.rejected)
+            tick()
     done = summary["rendered"]
     summary["seconds_per_image"] = summary["render_seconds"] / done if done else None
     summary["errors"] = summary["errors"][:20]

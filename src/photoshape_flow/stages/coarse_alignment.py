@@ -61,16 +61,17 @@ def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = N
     config = _config(cfg)
     if work is None:
         report = _features_report("shapes", coarse.compute_view_features(
-            config=config, settings=ctx.settings, renderer=ctx.renderer))
+            config=config, settings=ctx.settings, renderer=ctx.renderer, progress=ctx.progress))
         report = report.merge(_features_report("exemplars", coarse.compute_exemplar_features(
-            config=config, settings=ctx.settings)))
+            config=config, settings=ctx.settings, progress=ctx.progress)))
         report = report.merge(finish(ctx, cfg))
         return report
     if work.part == "shapes":
         counts = coarse.compute_view_features(list(work.ids), config=config, settings=ctx.settings,
-                                              renderer=ctx.renderer)
+                                              renderer=ctx.renderer, progress=ctx.progress)
     elif work.part == "exemplars":
-        counts = coarse.compute_exemplar_features(list(work.ids), config=config, settings=ctx.settings)
+        counts = coarse.compute_exemplar_features(list(work.ids), config=config, settings=ctx.settings,
+                                                  progress=ctx.progress)
     else:
         raise ValueError(f"{NAME} has no part {work.part!r}")
     return _features_report(work.part, counts)

@@ -16,15 +16,11 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.events import NO_EVENTS, EventSink
-from photoshape_flow.pipeline.ingest_common import Progress
+from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 
-# progress(label of the item just finished, items done, items in all): the callback ingest reports to
+# progress(task, items done, items in all): the one interface long loops report to (progress_sink.py)
 ProgressSink = Progress
-
-
-def no_progress(label: str, done: int, total: int) -> None:
-    """The progress sink of runs nobody watches."""
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ def run(ctx: StageContext, cfg: FineAlignmentConfig, work: WorkUnit | None = Non
     from photoshape_flow.pipeline.fine_alignment import run_fine_alignment
 
     summary = run_fine_alignment(None if work is None else list(work.ids), ctx.settings,
-                                 params=FineParams(size=cfg.size), renderer=ctx.renderer)
+                                 params=FineParams(size=cfg.size), renderer=ctx.renderer, progress=ctx.progress)
     return StageReport(NAME, done=int(summary["aligned"]), skipped=int(summary["up_to_date"]),
                        failed=int(summary["failed"]),
                        details={"failures": summary.get("failures", [])[:20]})

@@ -29,6 +29,11 @@ def inbox(ctx: StageContext) -> Path:
     return ctx.settings.data_root / "inbox"
 
 
+def _per_collection(ctx: StageContext, collection: str) -> Any:
+    """Ingest reports (file name, done, total): the stage's sink gets one task per collection instead."""
+    return lambda _label, done, total: ctx.progress(f"ingest {collection}", done, total)
+
+
 def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None) -> StageReport:
     from photoshape_flow.pipeline import ingest
 
@@ -41,7 +46,7 @@ def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None)
         paths = [Path(p) for p in roots.get(name, [])]
         if not paths:
             continue
-        kwargs: dict[str, Any] = {"settings": ctx.settings, "progress": ctx.progress}
+        kwargs: dict[str, Any] = {"settings": ctx.settings, "progress": _per_collection(ctx, name)}
         if request.source is not None and name != "envmaps":
             kwargs["source"] = request.source
         for key in ("license", "attribution"):

@@ -48,7 +48,7 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
     ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
     summary = run_publish(ids, None, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
-                          formats=cfg.formats)
+                          formats=cfg.formats, progress=ctx.progress)
     report = StageReport(NAME, done=summary.rendered, skipped=summary.skipped, failed=summary.failed,
                          details={"publish": summary.as_dict()})
     if work is None:
@@ -60,6 +60,6 @@ def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far."""
     from photoshape_flow.pipeline.gallery_site import write_gallery_site
 
-    site = write_gallery_site(gallery_dir(ctx), None, ctx.settings)
+    site = write_gallery_site(gallery_dir(ctx), None, ctx.settings, progress=ctx.progress)
     return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
                                       "gallery_waiting": site.waiting})

@@ -36,7 +36,7 @@ def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) 
     if work is not None:
         return _bootstrap(ctx, cfg, work)
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
-                             train_config=cfg.network)
+                             train_config=cfg.network, progress=ctx.progress)
     return _report(summary["part_substances"], summary["network"], summary["bootstrap"])
 
 
@@ -44,7 +44,7 @@ def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
     """After every bootstrap unit: the network (trained or resumed) and the parts' substances."""
     from photoshape_flow.pipeline.substances import train_and_assign
 
-    summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network)
+    summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network, progress=ctx.progress)
     return _report(summary["part_substances"], summary["network"], None)
 
 
@@ -52,7 +52,7 @@ def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> Stag
     from photoshape_flow.pipeline.training_renders import run_training_renders
 
     renders = run_training_renders("bootstrap", cfg.bootstrap_count, cfg.size, cfg.spp, ctx.settings,
-                                   renderer=ctx.renderer, indices=work.ids)
+                                   renderer=ctx.renderer, indices=work.ids, progress=ctx.progress)
     counts = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}
     return StageReport(NAME, done=int(renders["rendered"]), skipped=int(renders["skipped"]),
                        failed=int(renders["failed"]), rejected=int(renders["rejected"]), details={"bootstrap": counts})

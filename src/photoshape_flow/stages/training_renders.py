@@ -32,7 +32,7 @@ def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = N
     from photoshape_flow.pipeline.training_renders import run_training_renders
 
     summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer,
-                                   indices=None if work is None else work.ids)
+                                   indices=None if work is None else work.ids, progress=ctx.progress)
     return StageReport(
         NAME, done=int(summary["rendered"]), skipped=int(summary["skipped"]), failed=int(summary["failed"]),
         rejected=int(summary["rejected"]),

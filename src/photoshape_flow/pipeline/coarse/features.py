@@ -30,6 +30,7 @@ from photoshape_flow.pipeline.coarse.viewpoint_sets import (
     view_feature_hash,
 )
 from photoshape_flow.pipeline.errors import error_line
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -42,6 +43,7 @@ def compute_view_features(
     settings: Settings | None = None,
     renderer: Any = None,
     limit: int | None = None,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """Descriptor shards of the viewpoint sweep of each pending shape (all usable shapes by default).
 
@@ -90,6 +92,7 @@ def compute_view_features(
         conflict=["shape_id", "viewpoint_set_id", "descriptor"],
         url=url,
         what=("shape", "view features"),
+        progress=progress,
     )
     summary["skipped"] = len(shapes) - len(pending)
     summary["seconds"] = round(time.perf_counter() - start, 3)
@@ -102,6 +105,7 @@ def compute_exemplar_features(
     config: CoarseConfig | None = None,
     settings: Settings | None = None,
     limit: int | None = None,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """The descriptor of each pending exemplar from its stored crop and mask (same counts as above)."""
     start = time.perf_counter()
@@ -136,6 +140,7 @@ def compute_exemplar_features(
         conflict=["exemplar_id", "descriptor"],
         url=url,
         what=("exemplar", "features"),
+        progress=progress,
     )
     summary["skipped"] = len(exemplars) - len(pending)
     summary["seconds"] = round(time.perf_counter() - start, 3)
@@ -187,15 +192,16 @@ def _store_each(
     conflict: list[str],
     url: str,
     what: tuple[str, str],
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
     """Compute and upsert one feature row per item, each in its own transaction.
 
     `key` gives a row's identity and params_hash, `compute` its ok columns; an exception stores the
     `failed` columns with the error instead, so one item's failure never stops the batch. `conflict`
-    names the row's unique columns, `what` the item and the feature for the log.
+    names the row's unique columns, `what` the item and the feature for the log (and the progress task).
     """
     summary: dict[str, Any] = {"computed": 0, "skipped": 0, "failed": 0, "errors": {}}
-    for item in pending:
+    for item in counted(progress, f"coarse-alignment {what[0]} {what[1]}", pending):
         row = key(item)
         try:
             row.update(compute(item), status="ok", error=None)
