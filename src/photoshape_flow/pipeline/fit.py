@@ -1,0 +1,456 @@
+"""Fit stage: each observed part's material chosen by rendering the pair against its photo.
+
+For every pair ranked by the newest material classifier (`assignment` rows `classifier:<id>`):
+
+1. Lighting of the exemplar (`estimate_lighting`): every training envmap at `rotations` azimuths,
+   each rendered with the classifier's rank-1 materials at the exemplar's reference pair's camera,
+   exposure solved in closed form (`fit.lighting`); the lowest appearance loss wins. Stored in
+   ``exemplar.meta["fit_lighting"]`` with the key of its inputs and reused by every pair of the
+   exemplar until those inputs change.
+2. Candidates per observed part (`fit.candidates`): the ranking's top-K, the colour-nearest material
+   of every substance, every enabled material the classifier was not trained on.
+3. Renders (`fit.select.render_slots`): render j puts each part's j-th candidate on it, at the pair's
+   camera in the exemplar's frame; each part's render region is compared with the photo's aligned
+   region (`fit.appearance.distance`), and the cost adds the ranking prior.
+4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
+   classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
+
+Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
+start from, the candidate set and the lighting key; a pair whose hash is unchanged is skipped, and
+pairs are claimed one at a time (`work_claim`, stage ``fit:<method_key>``) like inference's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.align.partmap import exemplar_at, resize_labels, zoom_to_fit
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db import claims
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.fit import lighting as lt
+from photoshape_flow.fit.appearance import Appearance, Weights, appearance, distance, erode, to_lab
+from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
+from photoshape_flow.fit.select import rank_candidates, render_slots, scores_of
+from photoshape_flow.hashing import stable_hash
+from photoshape_flow.imaging.squares import crop_square, square_box
+from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
+from photoshape_flow.profiles import FitConfig
+from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import STATUS_OK
+
+log = logging.getLogger(__name__)
+
+METHOD = "fit"
+CODE_VERSION = "fit-1"
+LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
+OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
+
+
+@dataclass
+class FitSummary:
+    method_key: str | None
+    pairs_done: int = 0
+    pairs_skipped: int = 0
+    pairs_failed: list[tuple[int, str]] = field(default_factory=list)
+    rows: int = 0
+    lightings: int = 0  # lighting estimates computed (not reused)
+
+
+def weights_of(cfg: FitConfig) -> Weights:
+    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight)
+
+
+# -- rendering in the exemplar's frame ---------------------------------------------------------------------
+class FrameRenderer:
+    """A shape rendered at a pair's camera, cropped like the exemplar (tight square of the silhouette)."""
+
+    def __init__(self, renderer: Any, size: int, spp: int):
+        self.renderer = renderer
+        self.size = size
+        self.spp = spp
+        self._frames: dict[tuple[int, Any], tuple[Any, tuple[int, int, int], np.ndarray]] = {}
+
+    def _frame(self, mesh: Any, camera: Any) -> tuple[Any, tuple[int, int, int], np.ndarray]:
+        key = (id(mesh), camera)
+        if key not in self._frames:
+            zoomed = zoom_to_fit(mesh, camera)
+            ids = self.renderer.part_ids(mesh, zoomed, size=self.render_size)
+            box = square_box(ids > 0)
+            if box is None:
+                raise ValueError("the shape is not visible at the pair's camera")
+            self._frames = {key: (zoomed, box, resize_labels(crop_square(ids, *box, fill=0), self.size))}
+        return self._frames[key]
+
+    @property
+    def render_size(self) -> int:
+        return int(math.ceil(self.size * OVERSAMPLE))
+
+    def part_ids(self, mesh: Any, camera: Any) -> np.ndarray:
+        """(size, size) part indices of the shape in the frame (0 = background)."""
+        return self._frame(mesh, camera)[2]
+
+    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
+        """(size, size, 3) linear radiance in the frame (background 0)."""
+        zoomed, box, _ = self._frame(mesh, camera)
+        result = self.renderer.beauty(mesh, list(materials), zoomed, envmap, size=self.render_size, spp=self.spp,
+                                      background="transparent", seed=0)
+        crop = crop_square(result.hdr, *box, fill=0.0)
+        return cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_AREA)
+
+
+# -- what one pair is made of ----------------------------------------------------------------------------
+@dataclass
+class PairData:
+    """A pair's inputs at the fit resolution: the photo, the aligned regions, the ranking to start from."""
+
+    pair: m.Pair
+    mesh: Any
+    camera: Any
+    parts: dict[int, m.Part]  # part index -> row
+    photo_linear: np.ndarray
+    photo_lab: np.ndarray
+    masks: dict[int, np.ndarray]  # observed part index -> eroded aligned region
+    rows: dict[int, list[m.Assignment]]  # part index -> the classifier's rows, best first
+    source_hash: str | None  # params_hash of those rows
+
+    def rank1(self, index: int) -> int | None:
+        rows = self.rows.get(index)
+        return rows[0].material_id if rows else None
+
+    def photo_stats(self) -> dict[int, Appearance]:
+        return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
+
+
+class FitContext:
+    """What one fit run needs once: the classifier, materials, their colours and specs, envmaps, a renderer."""
+
+    def __init__(self, session: Session, store: BlobStore, classifier: m.Classifier, cfg: FitConfig,
+                 renderer: Any = None):
+        from photoshape_flow.pipeline.calibration import material_lab
+
+        self.store = store
+        self.cfg = cfg
+        self.classifier = classifier
+        self.source_key = f"classifier:{classifier.id}"
+        self.method_key = f"{METHOD}:{classifier.id}"
+        mats = session.execute(
+            sa.select(m.Material).where(m.Material.enabled, m.Material.status == STATUS_OK).order_by(m.Material.id)
+        ).scalars().all()
+        self.material_rows = {mat.id: mat for mat in mats}
+        self.material_substance = {mat.id: mat.substance for mat in mats}
+        self.material_labs = {mat.id: lab for mat in mats if (lab := material_lab(mat, store)) is not None}
+        self.untrained = sorted(set(self.material_substance) - {int(x) for x in (classifier.materials or [])})
+        envmaps = session.execute(
+            sa.select(m.Envmap).where(m.Envmap.enabled, m.Envmap.status == STATUS_OK, m.Envmap.blob.is_not(None))
+            .order_by(m.Envmap.id)
+        ).scalars().all()
+        training = [e for e in envmaps if (e.split or "train") == "train"] or list(envmaps)
+        self.envmaps = {e.id: e.blob for e in training}
+        self._renderer = renderer
+        self._frame: FrameRenderer | None = None
+        self._specs: dict[int, Any] = {}
+        self._meshes: dict[int, Any] = {}
+
+    @property
+    def frame(self) -> FrameRenderer:
+        if self._frame is None:
+            if self._renderer is None:
+                from photoshape_flow.render import Renderer
+
+                self._renderer = Renderer(resolve=self.store.resolve)
+            self._frame = FrameRenderer(self._renderer, self.cfg.size, self.cfg.spp)
+        return self._frame
+
+    def spec(self, material_id: int | None) -> Any:
+        """The render spec of a material (None: the part's built-in material)."""
+        if material_id is None or material_id not in self.material_rows:
+            return None
+        if material_id not in self._specs:
+            from photoshape_flow.pipeline.training_renders import material_spec
+
+            self._specs[material_id] = material_spec(self.material_rows[material_id], self.store)
+        return self._specs[material_id]
+
+    def envmap_spec(self, hypothesis: lt.Hypothesis) -> Any:
+        from photoshape_flow.render import EnvmapSpec
+
+        blob = self.envmaps.get(hypothesis.envmap_id)
+        return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=hypothesis.rotation)
+
+    def mesh(self, shape: m.Shape) -> Any:
+        from photoshape_flow.geometry.mesh import ShapeMesh
+
+        if shape.id not in self._meshes:
+            if not shape.mesh_blob:
+                raise ValueError(f"shape {shape.id} has no mesh")
+            self._meshes = {shape.id: ShapeMesh.from_npz_bytes(self.store.read_bytes(shape.mesh_blob))}
+        return self._meshes[shape.id]
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key}
+
+    def lighting_key(self, reference_pair: int, reference_hash: str | None) -> str:
+        """What a stored lighting estimate depends on: its pair and ranking, the envmaps, the config."""
+        return stable_hash({**self.params, "pair": reference_pair, "ranking": reference_hash,
+                            "envmaps": sorted(self.envmaps.items())})
+
+
+def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
+    """A pair's photo, aligned regions and classifier rows at the fit resolution; a one-line error when incomplete."""
+    from photoshape_flow.render import Camera
+
+    shape, exemplar = session.get(m.Shape, pair.shape_id), session.get(m.Exemplar, pair.exemplar_id)
+    if shape is None or exemplar is None or not exemplar.image_blob:
+        raise ValueError(f"pair {pair.id}: shape or exemplar image missing")
+    alignment = session.execute(
+        sa.select(m.Alignment).where(m.Alignment.pair_id == pair.id, m.Alignment.method == ALIGNMENT_METHOD,
+                                     m.Alignment.status == STATUS_OK)
+    ).scalar_one_or_none()
+    blob = alignment and (alignment.crf_blob or alignment.flow_blob or alignment.coarse_blob)
+    if not blob:
+        raise ValueError(f"pair {pair.id}: no fine alignment")
+    size = ctx.cfg.size
+    image = ctx.store.load_image(exemplar.image_blob)
+    mask = ctx.store.load_image(exemplar.mask_blob) if exemplar.mask_blob else np.full(image.shape[:2], 255, np.uint8)
+    rgb, _ = exemplar_at(image, mask, size)
+    labels = ctx.store.load_image(blob)
+    labels = resize_labels(labels[..., 0] if labels.ndim == 3 else labels, size).astype(np.int32)
+    parts = {p.index: p for p in session.execute(sa.select(m.Part).where(m.Part.shape_id == shape.id)).scalars()}
+    rows: dict[int, list[m.Assignment]] = {}
+    by_part = {p.id: p.index for p in parts.values()}
+    source_hash = None
+    for row in session.execute(
+        sa.select(m.Assignment).where(m.Assignment.pair_id == pair.id, m.Assignment.method_key == ctx.source_key)
+        .order_by(m.Assignment.part_id, m.Assignment.rank)
+    ).scalars():
+        rows.setdefault(by_part[row.part_id], []).append(row)
+        source_hash = row.params_hash
+    masks = {}
+    for index, part_rows in rows.items():
+        region = erode(labels == index, ctx.cfg.erode)
+        if not part_rows[0].unobserved and int(region.sum()) >= 12:
+            masks[index] = region
+    camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
+    return PairData(pair, ctx.mesh(shape), camera, parts, lt.photo_linear(rgb), to_lab(rgb), masks, rows,
+                    source_hash)
+
+
+def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:
+    """Each observed part's candidates (`fit.candidates`)."""
+    out = {}
+    for index, mask in sorted(data.masks.items()):
+        ranked = [RankedRow(int(r.material_id), r.substance or ctx.material_substance.get(r.material_id, ""), r.score)
+                  for r in data.rows[index] if r.material_id is not None]
+        part_lab = np.median(data.photo_lab[mask].reshape(-1, 3), axis=0)
+        out[index] = part_candidates(ranked, ctx.cfg.top_k, ctx.material_substance, ctx.material_labs, part_lab,
+                                     ctx.untrained, ctx.cfg.prior_floor)
+    return out
+
+
+def _materials(ctx: FitContext, data: PairData, chosen: dict[int, int]) -> list[Any]:
+    """One render spec per mesh part: the chosen candidate, else the part's rank-1, else its built-in."""
+    return [ctx.spec(chosen.get(p.index, data.rank1(p.index))) for p in data.mesh.parts]
+
+
+def _region_distances(ctx: FitContext, lab: np.ndarray, ids: np.ndarray, photo: dict[int, Appearance],
+                      indices: Sequence[int]) -> dict[int, float | None]:
+    """Per part: the distance between its rendered region and its photo region (None when either is missing)."""
+    out: dict[int, float | None] = {}
+    weights = weights_of(ctx.cfg)
+    for index in indices:
+        rendered = appearance(lab, erode(ids == index, ctx.cfg.erode))
+        out[index] = None if rendered is None or index not in photo else distance(rendered, photo[index], weights)
+    return out
+
+
+# -- lighting ----------------------------------------------------------------------------------------------
+def estimate_lighting(ctx: FitContext, data: PairData) -> dict[str, Any]:
+    """The best (envmap, rotation, exposure) for the pair's photo under its rank-1 materials (see module doc)."""
+    frame = ctx.frame
+    ids = frame.part_ids(data.mesh, data.camera)
+    materials = _materials(ctx, data, {})
+    photo = data.photo_stats()
+    photo_means = lt.region_means(data.photo_linear, data.masks)
+    rendered_masks = {i: erode(ids == i, ctx.cfg.erode) for i in data.masks}
+    hypotheses = [lt.Hypothesis(e, r) for e in sorted(ctx.envmaps) for r in lt.rotations(ctx.cfg.rotations)]
+    scored = []
+    for h in hypotheses or [lt.Hypothesis(0, 0.0)]:
+        linear = frame.render(data.mesh, materials, data.camera, ctx.envmap_spec(h))
+        scale = lt.exposure(lt.region_means(linear, rendered_masks), photo_means)
+        dists = _region_distances(ctx, to_lab(lt.exposed_srgb(linear, scale)), ids, photo, sorted(data.masks))
+        weights = {i: float(data.masks[i].sum()) for i, d in dists.items() if d is not None}
+        loss = (sum(weights[i] * dists[i] for i in weights) / sum(weights.values())  # type: ignore[operator]
+                if weights else math.inf)
+        scored.append((h, scale, loss))
+    h, scale, loss = lt.best(scored)
+    return {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
+            "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": len(scored)}
+
+
+def _reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pair | None:
+    """The exemplar's pair whose rank-1 assignment lights it: best shape match with a ranking and an alignment."""
+    return session.execute(
+        sa.select(m.Pair)
+        .join(m.Shape, m.Shape.id == m.Pair.shape_id)
+        .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD,
+                                   m.Alignment.status == STATUS_OK))
+        .where(m.Pair.exemplar_id == exemplar_id, ~m.Pair.exclude, ~m.Shape.exclude,
+               m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == ctx.source_key)))
+        .order_by(sa.func.coalesce(m.Pair.exemplar_rank, 1 << 30), m.Pair.distance, m.Pair.id)
+        .limit(1)
+    ).scalar_one_or_none()
+
+
+def _source_hash(session: Session, ctx: FitContext, pair_id: int) -> str | None:
+    return session.execute(
+        sa.select(m.Assignment.params_hash).where(m.Assignment.pair_id == pair_id,
+                                                  m.Assignment.method_key == ctx.source_key).limit(1)
+    ).scalar_one_or_none()
+
+
+def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tuple[dict[str, Any], bool]:
+    """The exemplar's stored lighting when its key still holds, else a fresh estimate (stored); (record, computed)."""
+    exemplar = session.get(m.Exemplar, data.pair.exemplar_id)
+    assert exemplar is not None
+    reference = _reference_pair(session, ctx, exemplar.id) or data.pair
+    key = ctx.lighting_key(reference.id, data.source_hash if reference.id == data.pair.id
+                           else _source_hash(session, ctx, reference.id))
+    stored = (exemplar.meta or {}).get(LIGHTING_KEY)
+    if isinstance(stored, dict) and stored.get("key") == key:
+        return stored, False
+    ref_data = data if reference.id == data.pair.id else load_pair(session, ctx, reference)
+    record = {**estimate_lighting(ctx, ref_data), "pair_id": reference.id, "key": key}
+    exemplar.meta = {**(exemplar.meta or {}), LIGHTING_KEY: record}
+    return record, True
+
+
+# -- one pair --------------------------------------------------------------------------------------------
+def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]], lighting_key: str) -> str:
+    """The hash a pair's fit rows carry: config, code, the ranking they start from, the candidates, the lighting."""
+    return stable_hash({**ctx.params, "ranking": data.source_hash, "lighting": lighting_key,
+                        "candidates": {str(i): [c.material_id for c in cs] for i, cs in sorted(candidates.items())}})
+
+
+def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
+                     light: dict[str, Any]) -> dict[int, dict[int, float | None]]:
+    """Part index -> {candidate material: distance}: one render per candidate slot (`render_slots`)."""
+    frame = ctx.frame
+    ids = frame.part_ids(data.mesh, data.camera)
+    envmap = ctx.envmap_spec(lt.Hypothesis(int(light.get("envmap_id") or 0), float(light.get("rotation", 0.0))))
+    photo = data.photo_stats()
+    measured: dict[int, dict[int, float | None]] = {i: {} for i in candidates}
+    for slot in render_slots(candidates):
+        linear = frame.render(data.mesh, _materials(ctx, data, slot), data.camera, envmap)
+        lab = to_lab(lt.exposed_srgb(linear, float(light.get("exposure", 1.0))))
+        fresh = [i for i, mid in slot.items() if mid not in measured[i]]
+        for index, value in _region_distances(ctx, lab, ids, photo, fresh).items():
+            measured[index][slot[index]] = value
+    return measured
+
+
+def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
+             measured: dict[int, dict[int, float | None]], params_hash: str) -> list[m.Assignment]:
+    """The pair's `fit` rows: observed parts ranked by cost, the others' classifier ranking copied."""
+    out = []
+    for index, rows in sorted(data.rows.items()):
+        base = rows[0]
+        common = {"pair_id": data.pair.id, "part_id": base.part_id, "method": METHOD, "method_key": ctx.method_key,
+                  "classifier_id": ctx.classifier.id, "params_hash": params_hash}
+        if index not in candidates:
+            for row in rows:
+                out.append(m.Assignment(**common, rank=row.rank, material_id=row.material_id, score=row.score,
+                                        substance=row.substance, unobserved=row.unobserved,
+                                        params={**(row.params or {}), "fit": {"source": "ranking-only"}}))
+            continue
+        ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.cfg.prior_weight)
+        for rank, (item, score) in enumerate(zip(ranked, scores_of(ranked), strict=True), start=1):
+            c = item.candidate
+            out.append(m.Assignment(
+                **common, rank=rank, material_id=c.material_id, score=score, substance=c.substance, unobserved=False,
+                params={"uv": IDENTITY_UV, "part_substance": (base.params or {}).get("part_substance"),
+                        "fit": {"source": c.source, "prior": round(c.prior, 6), "cost": round(item.cost, 6),
+                                "distance": None if item.distance is None else round(item.distance, 6)}},
+            ))
+    return out
+
+
+# -- the run ---------------------------------------------------------------------------------------------
+def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | None = None) -> list[int]:
+    """Active, aligned pairs with rows of `source_key`, in id order."""
+    from photoshape_flow.pipeline.progress import active_pairs
+
+    query = active_pairs().where(
+        m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == source_key))
+    ).order_by(m.Pair.id)
+    if pair_ids is not None:
+        query = query.where(m.Pair.id.in_(list(pair_ids)))
+    return list(session.execute(query).scalars())
+
+
+def _stored_hash(session: Session, pair_id: int, method_key: str) -> str | None:
+    return session.execute(
+        sa.select(m.Assignment.params_hash).where(m.Assignment.pair_id == pair_id,
+                                                  m.Assignment.method_key == method_key).limit(1)
+    ).scalar_one_or_none()
+
+
+def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: Settings | None = None,
+            renderer: Any = None, classifier_id: int | None = None) -> FitSummary:
+    """Fit every pending pair (see the module docstring); resumable and idempotent, one bad pair never stops it."""
+    settings = settings or get_settings()
+    store = BlobStore(settings.blob_root)
+    url = settings.resolved_database_url
+    with session_scope(url) as session:
+        classifier = resolve_classifier(session, classifier_id)
+        if classifier is None:
+            log.warning("fit: no trained material classifier yet; nothing to fit")
+            return FitSummary(None)
+        ctx = FitContext(session, store, classifier, cfg, renderer)
+        todo = fit_pairs_of(session, ctx.source_key, pair_ids)
+    summary = FitSummary(ctx.method_key)
+    stage = f"{METHOD}:{ctx.method_key}"
+    for pair_id in todo:
+        try:
+            with session_scope(url) as session:
+                pair = session.get(m.Pair, pair_id)
+                assert pair is not None
+                data = load_pair(session, ctx, pair)
+                candidates = candidates_of(ctx, data)
+                light, computed = exemplar_lighting(session, ctx, data)
+                summary.lightings += int(computed)
+                digest = pair_hash(ctx, data, candidates, str(light["key"]))
+                if _stored_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
+                        session, stage, [str(pair_id)], params_hash=digest,
+                        lease_seconds=settings.claim_lease_seconds, retry_failed=True):
+                    summary.pairs_skipped += 1
+                    continue
+            with session_scope(url) as session:
+                rows = fit_rows(ctx, data, candidates, select_materials(ctx, data, candidates, light), digest)
+                session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair_id,
+                                                              m.Assignment.method_key == ctx.method_key))
+                session.add_all(rows)
+                claims.complete(session, stage, [str(pair_id)])
+            summary.pairs_done += 1
+            summary.rows += len(rows)
+        except Exception as exc:  # one bad pair never stops the batch
+            reason = f"{type(exc).__name__}: {exc}"
+            log.warning("fit: pair %s failed: %s", pair_id, reason)
+            summary.pairs_failed.append((pair_id, reason))
+            with session_scope(url) as session:
+                claims.fail(session, stage, str(pair_id), reason)
+    log.info("fit %s: %d pairs, %d rows, %d skipped, %d failed, %d lighting estimates", ctx.method_key,
+             summary.pairs_done, summary.rows, summary.pairs_skipped, len(summary.pairs_failed), summary.lightings)
+    return summary
