@@ -24,27 +24,25 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.align.partmap import exemplar_at, resize_labels, zoom_to_fit
+from photoshape_flow.align.partmap import exemplar_at, resize_labels
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Appearance, Weights, appearance, distance, erode, to_lab
+from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
-from photoshape_flow.fit.select import rank_candidates, render_slots, scores_of
+from photoshape_flow.fit.scene import FitScene, FrameRenderer, estimate_lighting, measure_candidates
+from photoshape_flow.fit.select import rank_candidates, scores_of
 from photoshape_flow.hashing import stable_hash
-from photoshape_flow.imaging.squares import crop_square, square_box
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.store import BlobStore
@@ -55,7 +53,6 @@ log = logging.getLogger(__name__)
 METHOD = "fit"
 CODE_VERSION = "fit-1"
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
-OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
 
 
 @dataclass
@@ -72,65 +69,19 @@ def weights_of(cfg: FitConfig) -> Weights:
     return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight)
 
 
-# -- rendering in the exemplar's frame ---------------------------------------------------------------------
-class FrameRenderer:
-    """A shape rendered at a pair's camera, cropped like the exemplar (tight square of the silhouette)."""
-
-    def __init__(self, renderer: Any, size: int, spp: int):
-        self.renderer = renderer
-        self.size = size
-        self.spp = spp
-        self._frames: dict[tuple[int, Any], tuple[Any, tuple[int, int, int], np.ndarray]] = {}
-
-    def _frame(self, mesh: Any, camera: Any) -> tuple[Any, tuple[int, int, int], np.ndarray]:
-        key = (id(mesh), camera)
-        if key not in self._frames:
-            zoomed = zoom_to_fit(mesh, camera)
-            ids = self.renderer.part_ids(mesh, zoomed, size=self.render_size)
-            box = square_box(ids > 0)
-            if box is None:
-                raise ValueError("the shape is not visible at the pair's camera")
-            self._frames = {key: (zoomed, box, resize_labels(crop_square(ids, *box, fill=0), self.size))}
-        return self._frames[key]
-
-    @property
-    def render_size(self) -> int:
-        return int(math.ceil(self.size * OVERSAMPLE))
-
-    def part_ids(self, mesh: Any, camera: Any) -> np.ndarray:
-        """(size, size) part indices of the shape in the frame (0 = background)."""
-        return self._frame(mesh, camera)[2]
-
-    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
-        """(size, size, 3) linear radiance in the frame (background 0)."""
-        zoomed, box, _ = self._frame(mesh, camera)
-        result = self.renderer.beauty(mesh, list(materials), zoomed, envmap, size=self.render_size, spp=self.spp,
-                                      background="transparent", seed=0)
-        crop = crop_square(result.hdr, *box, fill=0.0)
-        return cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_AREA)
-
-
 # -- what one pair is made of ----------------------------------------------------------------------------
 @dataclass
 class PairData:
-    """A pair's inputs at the fit resolution: the photo, the aligned regions, the ranking to start from."""
+    """A pair's scene at the fit resolution and the classifier ranking it starts from."""
 
     pair: m.Pair
-    mesh: Any
-    camera: Any
-    parts: dict[int, m.Part]  # part index -> row
-    photo_linear: np.ndarray
-    photo_lab: np.ndarray
-    masks: dict[int, np.ndarray]  # observed part index -> eroded aligned region
+    scene: FitScene
     rows: dict[int, list[m.Assignment]]  # part index -> the classifier's rows, best first
     source_hash: str | None  # params_hash of those rows
 
-    def rank1(self, index: int) -> int | None:
-        rows = self.rows.get(index)
-        return rows[0].material_id if rows else None
-
-    def photo_stats(self) -> dict[int, Appearance]:
-        return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
+    def rank1(self) -> dict[int, int | None]:
+        """Part index -> the classifier's first material."""
+        return {index: rows[0].material_id for index, rows in self.rows.items() if rows}
 
 
 class FitContext:
@@ -228,9 +179,8 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
     rgb, _ = exemplar_at(image, mask, size)
     labels = ctx.store.load_image(blob)
     labels = resize_labels(labels[..., 0] if labels.ndim == 3 else labels, size).astype(np.int32)
-    parts = {p.index: p for p in session.execute(sa.select(m.Part).where(m.Part.shape_id == shape.id)).scalars()}
+    by_part = dict(session.execute(sa.select(m.Part.id, m.Part.index).where(m.Part.shape_id == shape.id)).all())
     rows: dict[int, list[m.Assignment]] = {}
-    by_part = {p.id: p.index for p in parts.values()}
     source_hash = None
     for row in session.execute(
         sa.select(m.Assignment).where(m.Assignment.pair_id == pair.id, m.Assignment.method_key == ctx.source_key)
@@ -238,66 +188,35 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
     ).scalars():
         rows.setdefault(by_part[row.part_id], []).append(row)
         source_hash = row.params_hash
-    masks = {}
-    for index, part_rows in rows.items():
-        region = erode(labels == index, ctx.cfg.erode)
-        if not part_rows[0].unobserved and int(region.sum()) >= 12:
-            masks[index] = region
+    observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    return PairData(pair, ctx.mesh(shape), camera, parts, lt.photo_linear(rgb), to_lab(rgb), masks, rows,
-                    source_hash)
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode)
+    return PairData(pair, scene, rows, source_hash)
 
 
 def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:
     """Each observed part's candidates (`fit.candidates`)."""
     out = {}
-    for index, mask in sorted(data.masks.items()):
+    for index, mask in sorted(data.scene.masks.items()):
         ranked = [RankedRow(int(r.material_id), r.substance or ctx.material_substance.get(r.material_id, ""), r.score)
                   for r in data.rows[index] if r.material_id is not None]
-        part_lab = np.median(data.photo_lab[mask].reshape(-1, 3), axis=0)
+        part_lab = np.median(data.scene.photo_lab[mask].reshape(-1, 3), axis=0)
         out[index] = part_candidates(ranked, ctx.cfg.top_k, ctx.material_substance, ctx.material_labs, part_lab,
                                      ctx.untrained, ctx.cfg.prior_floor)
     return out
 
 
-def _materials(ctx: FitContext, data: PairData, chosen: dict[int, int]) -> list[Any]:
-    """One render spec per mesh part: the chosen candidate, else the part's rank-1, else its built-in."""
-    return [ctx.spec(chosen.get(p.index, data.rank1(p.index))) for p in data.mesh.parts]
-
-
-def _region_distances(ctx: FitContext, lab: np.ndarray, ids: np.ndarray, photo: dict[int, Appearance],
-                      indices: Sequence[int]) -> dict[int, float | None]:
-    """Per part: the distance between its rendered region and its photo region (None when either is missing)."""
-    out: dict[int, float | None] = {}
-    weights = weights_of(ctx.cfg)
-    for index in indices:
-        rendered = appearance(lab, erode(ids == index, ctx.cfg.erode))
-        out[index] = None if rendered is None or index not in photo else distance(rendered, photo[index], weights)
-    return out
-
-
-# -- lighting ----------------------------------------------------------------------------------------------
-def estimate_lighting(ctx: FitContext, data: PairData) -> dict[str, Any]:
-    """The best (envmap, rotation, exposure) for the pair's photo under its rank-1 materials (see module doc)."""
-    frame = ctx.frame
-    ids = frame.part_ids(data.mesh, data.camera)
-    materials = _materials(ctx, data, {})
-    photo = data.photo_stats()
-    photo_means = lt.region_means(data.photo_linear, data.masks)
-    rendered_masks = {i: erode(ids == i, ctx.cfg.erode) for i in data.masks}
+def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
+    """The best (envmap, rotation, exposure) for the pair's photo under its rank-1 materials (`fit.scene`)."""
+    rank1 = data.rank1()
+    materials = [ctx.spec(rank1.get(p.index)) for p in data.scene.mesh.parts]
     hypotheses = [lt.Hypothesis(e, r) for e in sorted(ctx.envmaps) for r in lt.rotations(ctx.cfg.rotations)]
-    scored = []
-    for h in hypotheses or [lt.Hypothesis(0, 0.0)]:
-        linear = frame.render(data.mesh, materials, data.camera, ctx.envmap_spec(h))
-        scale = lt.exposure(lt.region_means(linear, rendered_masks), photo_means)
-        dists = _region_distances(ctx, to_lab(lt.exposed_srgb(linear, scale)), ids, photo, sorted(data.masks))
-        weights = {i: float(data.masks[i].sum()) for i, d in dists.items() if d is not None}
-        loss = (sum(weights[i] * dists[i] for i in weights) / sum(weights.values())  # type: ignore[operator]
-                if weights else math.inf)
-        scored.append((h, scale, loss))
-    h, scale, loss = lt.best(scored)
+    hypotheses = hypotheses or [lt.Hypothesis(0, 0.0)]  # no envmap: the constant white sky
+    h, scale, loss = estimate_lighting(ctx.frame, data.scene, materials,
+                                       [(h, ctx.envmap_spec(h)) for h in hypotheses], weights_of(ctx.cfg),
+                                       ctx.cfg.erode)
     return {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
-            "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": len(scored)}
+            "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": len(hypotheses)}
 
 
 def _reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pair | None:
@@ -332,7 +251,7 @@ def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tupl
     if isinstance(stored, dict) and stored.get("key") == key:
         return stored, False
     ref_data = data if reference.id == data.pair.id else load_pair(session, ctx, reference)
-    record = {**estimate_lighting(ctx, ref_data), "pair_id": reference.id, "key": key}
+    record = {**lighting_estimate(ctx, ref_data), "pair_id": reference.id, "key": key}
     exemplar.meta = {**(exemplar.meta or {}), LIGHTING_KEY: record}
     return record, True
 
@@ -346,19 +265,10 @@ def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candid
 
 def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
                      light: dict[str, Any]) -> dict[int, dict[int, float | None]]:
-    """Part index -> {candidate material: distance}: one render per candidate slot (`render_slots`)."""
-    frame = ctx.frame
-    ids = frame.part_ids(data.mesh, data.camera)
+    """Part index -> {candidate material: distance} under the exemplar's lighting (`fit.scene.measure_candidates`)."""
     envmap = ctx.envmap_spec(lt.Hypothesis(int(light.get("envmap_id") or 0), float(light.get("rotation", 0.0))))
-    photo = data.photo_stats()
-    measured: dict[int, dict[int, float | None]] = {i: {} for i in candidates}
-    for slot in render_slots(candidates):
-        linear = frame.render(data.mesh, _materials(ctx, data, slot), data.camera, envmap)
-        lab = to_lab(lt.exposed_srgb(linear, float(light.get("exposure", 1.0))))
-        fresh = [i for i, mid in slot.items() if mid not in measured[i]]
-        for index, value in _region_distances(ctx, lab, ids, photo, fresh).items():
-            measured[index][slot[index]] = value
-    return measured
+    return measure_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap,
+                              float(light.get("exposure", 1.0)), weights_of(ctx.cfg), ctx.cfg.erode)
 
 
 def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
