@@ -73,7 +73,7 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
         data = asyncio.run(artifacts())
         keys = set(data)
     assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
-                                       "training-renders", "training", "inference", "publish"]
+                                       "training-renders", "training", "inference", "fit", "publish"]
     assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-progress"} <= keys
     # nothing is pending after a finished run: publish counts only pairs up to the tiny profile's max_rank
     assert {p.stage: p.pending for p in finished} == dict.fromkeys(result["seconds"], 0)
