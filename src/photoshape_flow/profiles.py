@@ -102,7 +102,10 @@ class FitConfig:
     size: int = 128  # render and comparison resolution (pixels, square exemplar frame)
     spp: int = 16
     rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
+    lighting_rounds: int = 1  # 2+: then select, and light the winners again (no gain measured yet)
     erode: int = 1  # pixels shrunk off each part mask before comparing
+    blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
+    exposure_rounds: int = 3  # exposure re-solved with the winners, then re-selected (no new renders)
     color_weight: float = 1.0  # CIELAB mean
     contrast_weight: float = 0.5  # CIELAB standard deviation
     gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales

@@ -17,7 +17,13 @@ from tests.render.conftest import write_exr
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.candidates import Candidate
-from photoshape_flow.fit.scene import FitScene, FrameRenderer, estimate_lighting, measure_candidates
+from photoshape_flow.fit.scene import (
+    FitScene,
+    FrameRenderer,
+    estimate_lighting,
+    render_candidates,
+    select_with_exposure,
+)
 from photoshape_flow.fit.select import rank_candidates
 from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec
 from photoshape_flow.render.specs import linear_to_srgb
@@ -93,11 +99,14 @@ def test_lighting_estimate_picks_the_photo_envmap_and_its_exposure(scene) -> Non
 
 
 def test_the_true_material_scores_best_among_other_substances_and_colours(scene) -> None:  # type: ignore[no-untyped-def]
+    """Even from a wrong exposure (the ranking's first materials lit it): re-solved with the winners."""
     frame, fit_scene = _fit_scene(scene)
     candidates = {i: [Candidate(mid, MATERIALS[mid][0], 1.0 / len(MATERIALS), "ranking")
                       for mid in sorted(MATERIALS, reverse=True)] for i in (1, 2)}
-    measured = measure_candidates(frame, fit_scene, {1: 6, 2: 6}, candidates, _spec, scene[3][10], EXPOSURE,
-                                  Weights())
+    renders = render_candidates(frame, fit_scene, {1: 6, 2: 6}, candidates, _spec, scene[3][10])
+    assert len(renders.renders) == len(MATERIALS)  # both parts switch candidate in the same render
+    measured, exposure = select_with_exposure(renders, fit_scene, candidates, 2.5 * EXPOSURE, Weights(), 0.3)
+    assert exposure == pytest.approx(EXPOSURE, rel=0.15)
     for index, material in TRUTH.items():
         ranked = rank_candidates(candidates[index], measured[index], prior_weight=0.3)
         assert ranked[0].candidate.material_id == material, (index, [(s.candidate.material_id, s.cost)

@@ -68,6 +68,18 @@ def erode(mask: np.ndarray, pixels: int) -> np.ndarray:
     return eroded if eroded.sum() >= MIN_PIXELS else mask
 
 
+def soften(image: np.ndarray, sigma: float) -> np.ndarray:
+    """A Gaussian blur of `sigma` pixels (none when sigma <= 0).
+
+    Applied to the render and the photo alike before any statistic: a product photo is softer than a
+    path-traced render (lens, demosaicing, JPEG, a resize) and a low-spp render is noisier than a
+    photo; both differences live at the finest scale, where they would swamp the texture statistics.
+    """
+    if sigma <= 0:
+        return image
+    return cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), sigmaX=float(sigma))
+
+
 def _gradient_magnitude(lightness: np.ndarray) -> np.ndarray:
     gx = cv2.Sobel(lightness, cv2.CV_32F, 1, 0, ksize=3) / 8.0
     gy = cv2.Sobel(lightness, cv2.CV_32F, 0, 1, ksize=3) / 8.0

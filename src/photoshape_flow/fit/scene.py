@@ -18,7 +18,7 @@ import numpy as np
 
 from photoshape_flow.align.partmap import resize_labels, zoom_to_fit
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Appearance, Weights, appearance, distance, erode, to_lab
+from photoshape_flow.fit.appearance import Appearance, Weights, appearance, distance, erode, soften, to_lab
 from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.select import render_slots
 from photoshape_flow.imaging.squares import crop_square, square_box
@@ -56,12 +56,18 @@ class FrameRenderer:
         return self._frame(mesh, camera)[2]
 
     def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
-        """(size, size, 3) linear radiance in the frame (background 0)."""
+        """(size, size, 3) linear radiance in the frame, un-premultiplied (background 0).
+
+        Un-premultiplied so that a thin part's edge pixels carry the part's colour, not a blend with
+        the (black) background: the photo's regions exclude its background instead (`FitScene`).
+        """
         zoomed, box, _ = self._frame(mesh, camera)
         result = self.renderer.beauty(mesh, list(materials), zoomed, envmap, size=self.render_size, spp=self.spp,
                                       background="transparent", seed=0)
-        crop = crop_square(result.hdr, *box, fill=0.0)
-        return cv2.resize(crop, (self.size, self.size), interpolation=cv2.INTER_AREA)
+        size = (self.size, self.size)
+        rgb = cv2.resize(crop_square(result.hdr, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
+        alpha = cv2.resize(crop_square(result.alpha, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
+        return np.where(alpha[..., None] > 0.05, rgb / np.maximum(alpha, 0.05)[..., None], 0.0).astype(np.float32)
 
 
 @dataclass
@@ -73,17 +79,29 @@ class FitScene:
     photo_linear: np.ndarray  # (size, size, 3)
     photo_lab: np.ndarray
     masks: dict[int, np.ndarray]  # observed part index -> region of the photo (eroded)
+    blur: float = 0.0  # Gaussian sigma (pixels) applied to the photo and to every render (`soften`)
 
     @classmethod
     def from_photo(cls, mesh: Any, camera: Any, photo_srgb: np.ndarray, labels: np.ndarray,
-                   indices: Sequence[int], erode_pixels: int = 1, min_pixels: int = 12) -> FitScene:
-        """`photo_srgb` uint8 and `labels` (part index per pixel) at the same size; parts below `min_pixels` dropped."""
+                   indices: Sequence[int], erode_pixels: int = 1, min_pixels: int = 12,
+                   blur: float = 0.0, foreground: np.ndarray | None = None) -> FitScene:
+        """`photo_srgb` uint8, `labels` (part index per pixel) and the photo's `foreground` at the same size.
+
+        A part's region is its labels inside the foreground (the aligned map spills onto the
+        background around thin parts), eroded; parts left with fewer than `min_pixels` are dropped.
+        """
+        inside = np.ones(labels.shape, bool) if foreground is None else np.asarray(foreground, bool)
         masks = {}
         for index in indices:
-            region = erode(labels == index, erode_pixels)
+            region = erode((labels == index) & inside, erode_pixels)
             if int(region.sum()) >= min_pixels:
                 masks[index] = region
-        return cls(mesh, camera, lt.photo_linear(photo_srgb), to_lab(photo_srgb), masks)
+        linear = soften(lt.photo_linear(photo_srgb), blur)
+        return cls(mesh, camera, linear, to_lab(lt.exposed_srgb(linear, 1.0)), masks, blur)
+
+    def render(self, frame: FrameRenderer, materials: Sequence[Any], envmap: Any) -> np.ndarray:
+        """A render of the scene's shape in the frame, softened like the photo (linear RGB)."""
+        return soften(frame.render(self.mesh, materials, self.camera, envmap), self.blur)
 
     def photo_stats(self) -> dict[int, Appearance]:
         return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
@@ -113,7 +131,7 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
     rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
     scored = []
     for hypothesis, envmap in hypotheses:
-        linear = frame.render(scene.mesh, materials, scene.camera, envmap)
+        linear = scene.render(frame, materials, envmap)
         scale = lt.exposure(lt.region_means(linear, rendered_masks), photo_means)
         dists = region_distances(to_lab(lt.exposed_srgb(linear, scale)), ids, photo, sorted(scene.masks), weights,
                                  erode_pixels)
@@ -123,23 +141,75 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
     return lt.best(scored)
 
 
-def measure_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, int | None],
-                       candidates: Mapping[int, Sequence[Candidate]], spec_of: Callable[[int | None], Any],
-                       envmap: Any, exposure: float, weights: Weights,
-                       erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
-    """Part index -> {candidate material: distance}, one render per candidate slot (`render_slots`).
+@dataclass
+class CandidateRenders:
+    """The slot renders of one pair: which render shows each (part, candidate), and its rendered region's mean."""
+
+    renders: list[np.ndarray]  # linear RGB, softened like the photo
+    where: dict[int, dict[int, int]]  # part index -> candidate material -> index into `renders`
+    means: dict[int, dict[int, tuple[np.ndarray, int]]]  # part index -> candidate -> (mean linear RGB, pixels)
+    ids: np.ndarray  # the frame's part indices
+
+
+def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, int | None],
+                      candidates: Mapping[int, Sequence[Candidate]], spec_of: Callable[[int | None], Any],
+                      envmap: Any, erode_pixels: int = 1) -> CandidateRenders:
+    """One render per candidate slot (`render_slots`) under `envmap`.
 
     `base`: the material of every mesh part that is not switched (part index -> material id, None or
     absent: built-in); `spec_of` turns a material id into a render spec.
     """
     ids = frame.part_ids(scene.mesh, scene.camera)
-    photo = scene.photo_stats()
-    measured: dict[int, dict[int, float | None]] = {i: {} for i in candidates}
+    regions = {i: erode(ids == i, erode_pixels) for i in candidates}
+    out = CandidateRenders([], {i: {} for i in candidates}, {i: {} for i in candidates}, ids)
     for slot in render_slots(candidates):
-        materials = [spec_of(slot.get(p.index, base.get(p.index))) for p in scene.mesh.parts]
-        linear = frame.render(scene.mesh, materials, scene.camera, envmap)
+        linear = scene.render(frame, [spec_of(slot.get(p.index, base.get(p.index))) for p in scene.mesh.parts],
+                              envmap)
+        out.renders.append(linear)
+        for index, material in slot.items():
+            if material not in out.where[index]:
+                out.where[index][material] = len(out.renders) - 1
+                if regions[index].any():
+                    out.means[index][material] = (linear[regions[index]].mean(axis=0), int(regions[index].sum()))
+    return out
+
+
+def candidate_distances(renders: CandidateRenders, scene: FitScene, exposure: float, weights: Weights,
+                        erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
+    """Part index -> {candidate material: distance to the photo} with the renders at `exposure`."""
+    photo = scene.photo_stats()
+    out: dict[int, dict[int, float | None]] = {i: {} for i in renders.where}
+    for k, linear in enumerate(renders.renders):
+        shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
+        if not shown:
+            continue
         lab = to_lab(lt.exposed_srgb(linear, exposure))
-        fresh = [i for i, mid in slot.items() if mid not in measured[i]]
-        for index, value in region_distances(lab, ids, photo, fresh, weights, erode_pixels).items():
-            measured[index][slot[index]] = value
-    return measured
+        for index, value in region_distances(lab, renders.ids, photo, sorted(shown), weights, erode_pixels).items():
+            out[index][shown[index]] = value
+    return out
+
+
+def select_with_exposure(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
+                         exposure: float, weights: Weights, prior_weight: float, rounds: int = 3,
+                         erode_pixels: int = 1) -> tuple[dict[int, dict[int, float | None]], float]:
+    """(distances, exposure): the winners and the exposure solved in turn, without new renders.
+
+    The exposure estimated with the ranking's first materials is biased when they are wrong (a dark
+    wrong material asks for a bright exposure); after each selection the exposure is solved again in
+    closed form with the winners' rendered means, up to `rounds` times or until it settles (1%).
+    """
+    from photoshape_flow.fit.select import rank_candidates
+
+    photo_means = lt.region_means(scene.photo_linear, scene.masks)
+    while True:
+        measured = candidate_distances(renders, scene, exposure, weights, erode_pixels)
+        if rounds <= 0:
+            return measured, exposure
+        rounds -= 1
+        winners = {i: rank_candidates(candidates[i], measured[i], prior_weight)[0].candidate.material_id
+                   for i in candidates if candidates[i]}
+        means = {i: renders.means[i][w] for i, w in winners.items() if w in renders.means[i]}
+        update = lt.exposure(means, photo_means) if means else exposure
+        if abs(math.log(update / exposure)) < 0.01:
+            return measured, exposure
+        exposure = update

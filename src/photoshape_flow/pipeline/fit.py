@@ -40,7 +40,13 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
-from photoshape_flow.fit.scene import FitScene, FrameRenderer, estimate_lighting, measure_candidates
+from photoshape_flow.fit.scene import (
+    FitScene,
+    FrameRenderer,
+    estimate_lighting,
+    render_candidates,
+    select_with_exposure,
+)
 from photoshape_flow.fit.select import rank_candidates, scores_of
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
@@ -176,7 +182,7 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
     size = ctx.cfg.size
     image = ctx.store.load_image(exemplar.image_blob)
     mask = ctx.store.load_image(exemplar.mask_blob) if exemplar.mask_blob else np.full(image.shape[:2], 255, np.uint8)
-    rgb, _ = exemplar_at(image, mask, size)
+    rgb, foreground = exemplar_at(image, mask, size)
     labels = ctx.store.load_image(blob)
     labels = resize_labels(labels[..., 0] if labels.ndim == 3 else labels, size).astype(np.int32)
     by_part = dict(session.execute(sa.select(m.Part.id, m.Part.index).where(m.Part.shape_id == shape.id)).all())
@@ -190,7 +196,8 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
         source_hash = row.params_hash
     observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode)
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
+                                foreground=foreground)
     return PairData(pair, scene, rows, source_hash)
 
 
@@ -207,16 +214,30 @@ def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]
 
 
 def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
-    """The best (envmap, rotation, exposure) for the pair's photo under its rank-1 materials (`fit.scene`)."""
-    rank1 = data.rank1()
-    materials = [ctx.spec(rank1.get(p.index)) for p in data.scene.mesh.parts]
+    """The best (envmap, rotation, exposure) for the pair's photo (`fit.scene.estimate_lighting`).
+
+    Round 1 lights the ranking's first materials; each further round (`lighting_rounds`) selects the
+    materials under the current estimate and lights those winners again, so a wrong first material
+    does not fix the lighting for good.
+    """
     hypotheses = [lt.Hypothesis(e, r) for e in sorted(ctx.envmaps) for r in lt.rotations(ctx.cfg.rotations)]
     hypotheses = hypotheses or [lt.Hypothesis(0, 0.0)]  # no envmap: the constant white sky
-    h, scale, loss = estimate_lighting(ctx.frame, data.scene, materials,
-                                       [(h, ctx.envmap_spec(h)) for h in hypotheses], weights_of(ctx.cfg),
-                                       ctx.cfg.erode)
-    return {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
-            "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": len(hypotheses)}
+    chosen = data.rank1()
+    light: dict[str, Any] = {}
+    for round_ in range(max(1, ctx.cfg.lighting_rounds)):
+        if round_:
+            candidates = candidates_of(ctx, data)
+            measured, _ = select_materials(ctx, data, candidates, light)
+            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.cfg.prior_weight)[0].candidate.material_id
+                                   for i, c in candidates.items() if c}}
+        materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
+        h, scale, loss = estimate_lighting(ctx.frame, data.scene, materials,
+                                           [(h, ctx.envmap_spec(h)) for h in hypotheses], weights_of(ctx.cfg),
+                                           ctx.cfg.erode)
+        light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
+                 "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": len(hypotheses),
+                 "rounds": round_ + 1}
+    return light
 
 
 def _reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pair | None:
@@ -264,15 +285,16 @@ def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candid
 
 
 def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
-                     light: dict[str, Any]) -> dict[int, dict[int, float | None]]:
-    """Part index -> {candidate material: distance} under the exemplar's lighting (`fit.scene.measure_candidates`)."""
+                     light: dict[str, Any]) -> tuple[dict[int, dict[int, float | None]], float]:
+    """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`)."""
     envmap = ctx.envmap_spec(lt.Hypothesis(int(light.get("envmap_id") or 0), float(light.get("rotation", 0.0))))
-    return measure_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap,
-                              float(light.get("exposure", 1.0)), weights_of(ctx.cfg), ctx.cfg.erode)
+    renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
+    return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
+                                weights_of(ctx.cfg), ctx.cfg.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
 
 
 def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
-             measured: dict[int, dict[int, float | None]], params_hash: str) -> list[m.Assignment]:
+             measured: dict[int, dict[int, float | None]], exposure: float, params_hash: str) -> list[m.Assignment]:
     """The pair's `fit` rows: observed parts ranked by cost, the others' classifier ranking copied."""
     out = []
     for index, rows in sorted(data.rows.items()):
@@ -292,7 +314,8 @@ def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candida
                 **common, rank=rank, material_id=c.material_id, score=score, substance=c.substance, unobserved=False,
                 params={"uv": IDENTITY_UV, "part_substance": (base.params or {}).get("part_substance"),
                         "fit": {"source": c.source, "prior": round(c.prior, 6), "cost": round(item.cost, 6),
-                                "distance": None if item.distance is None else round(item.distance, 6)}},
+                                "distance": None if item.distance is None else round(item.distance, 6),
+                                "exposure": round(exposure, 6)}},
             ))
     return out
 
@@ -348,7 +371,7 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                     summary.pairs_skipped += 1
                     continue
             with session_scope(url) as session:
-                rows = fit_rows(ctx, data, candidates, select_materials(ctx, data, candidates, light), digest)
+                rows = fit_rows(ctx, data, candidates, *select_materials(ctx, data, candidates, light), digest)
                 session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair_id,
                                                               m.Assignment.method_key == ctx.method_key))
                 session.add_all(rows)
