@@ -43,6 +43,8 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
                                   materials=[x.id for x in materials.values()][:-1])  # the last one: untrained
         session.add(classifier)
         session.flush()
+        untrained_id = list(materials.values())[-1].id
+        blind: m.Pair | None = None
         for exemplar_id, truth in ev._exemplar_truths(session, gt, "demo-tiny").items():
             if not truth.in_collection:
                 continue
@@ -66,7 +68,20 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
                                              rank=rank, material_id=material.id, score=score,
                                              substance=material.substance, params_hash="planted"))
                 truth_of[(pair.id, part.id)] = true.id
-        return truth_of, list(materials.values())[-1].id
+            if not blind:  # the first exemplar also gets a better-ranked pair whose alignment lost every part
+                other = next(x for name, x in sorted(shapes.items()) if name != truth.shape)
+                blind = m.Pair(shape_id=other.id, exemplar_id=exemplar_id, rank=2, exemplar_rank=0, distance=0.0,
+                               azimuth=camera.azimuth, elevation=camera.elevation, fov=camera.fov,
+                               camera_distance=camera.distance)
+                session.add(blind)
+                session.flush()
+                session.add(m.Alignment(pair_id=blind.id, method="flow-crf",
+                                        crf_blob=store.put_image(np.zeros_like(labels, np.uint8))))
+                session.add_all([m.Assignment(pair_id=blind.id, part_id=part.id, method="classifier",
+                                              method_key=f"classifier:{classifier.id}", classifier_id=classifier.id,
+                                              rank=1, material_id=untrained_id, score=1.0, params_hash="planted")
+                                 for part in other.parts])
+        return truth_of, untrained_id
 
 
 def _fit_rows(url: str) -> list[tuple]:
@@ -89,9 +104,16 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
     assert len(pairs) >= 2
     ctx = StageContext.create()
     first = run_stage("fit", "tiny", ctx)
-    assert (first.done, first.skipped, first.failed) == (len(pairs), 0, 0)
+    assert (first.done, first.skipped, first.failed) == (len(pairs) + 1, 0, 0)
     with session_scope(db_url) as session:
-        rows = session.execute(sa.select(m.Assignment).where(m.Assignment.method == "fit")
+        blind = session.execute(sa.select(m.Pair).where(m.Pair.exemplar_rank == 0)).scalar_one()
+        copied = session.execute(sa.select(m.Assignment).where(m.Assignment.pair_id == blind.id,
+                                                               m.Assignment.method == "fit")).scalars().all()
+        assert copied and {r.params["fit"]["source"] for r in copied} == {"ranking-only"}
+        lit_by = session.get(m.Exemplar, blind.exemplar_id).meta["fit_lighting"]["pair_id"]
+        assert lit_by != blind.id and lit_by in pairs  # the blind reference could not light its exemplar
+        rows = session.execute(sa.select(m.Assignment).where(m.Assignment.method == "fit",
+                                                             m.Assignment.pair_id.in_(pairs))
                                .order_by(m.Assignment.pair_id, m.Assignment.part_id, m.Assignment.rank)).scalars().all()
         by_part: dict[tuple[int, int], list[m.Assignment]] = {}
         for r in rows:
@@ -110,13 +132,13 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
                if "fit_lighting" in (e.meta or {})}
         assert len(lit) == len(pairs) and all(x["envmap_id"] and x["exposure"] > 0 for x in lit.values())
         assert all("crop" in e.meta for e in session.execute(sa.select(m.Exemplar)).scalars())  # ingest's meta kept
-        assert {p for p, _ in candidate_method_keys(session, "fit")} == pairs  # exports and the gallery can use it
+        assert {p for p, _ in candidate_method_keys(session, "fit")} == pairs | {blind.id}  # exports, gallery
 
     before = _fit_rows(db_url)
     again = run_stage("fit", "tiny", ctx)
-    assert (again.done, again.skipped, again.failed) == (0, len(pairs), 0) and _fit_rows(db_url) == before
+    assert (again.done, again.skipped, again.failed) == (0, len(pairs) + 1, 0) and _fit_rows(db_url) == before
     relit = run_stage("fit", resolve_profile("tiny", ["fit.lighting_rounds=2"]), ctx)
-    assert relit.done == len(pairs)  # a changed config changes every pair's hash and every lighting key
+    assert relit.done == len(pairs) + 1  # a changed config changes every pair's hash and every lighting key
     with session_scope(db_url) as session:
         rounds = [e.meta["fit_lighting"]["rounds"] for e in session.execute(sa.select(m.Exemplar)).scalars()
                   if "fit_lighting" in (e.meta or {})]

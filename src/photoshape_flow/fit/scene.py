@@ -125,6 +125,8 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
     Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
     closed-form fit of the per-part mean colours; its loss the pixel-weighted mean part distance.
     """
+    if not scene.photo_stats():
+        raise ValueError("no observed part to light (every aligned part is too small)")
     ids = frame.part_ids(scene.mesh, scene.camera)
     photo = scene.photo_stats()
     photo_means = lt.region_means(scene.photo_linear, scene.masks)

@@ -202,14 +202,16 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
 
 
 def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:
-    """Each observed part's candidates (`fit.candidates`)."""
+    """Each observed part's candidates (`fit.candidates`); a part with none keeps the ranking (absent here)."""
     out = {}
     for index, mask in sorted(data.scene.masks.items()):
         ranked = [RankedRow(int(r.material_id), r.substance or ctx.material_substance.get(r.material_id, ""), r.score)
                   for r in data.rows[index] if r.material_id is not None]
         part_lab = np.median(data.scene.photo_lab[mask].reshape(-1, 3), axis=0)
-        out[index] = part_candidates(ranked, ctx.cfg.top_k, ctx.material_substance, ctx.material_labs, part_lab,
+        candidates = part_candidates(ranked, ctx.cfg.top_k, ctx.material_substance, ctx.material_labs, part_lab,
                                      ctx.untrained, ctx.cfg.prior_floor)
+        if candidates:
+            out[index] = candidates
     return out
 
 
@@ -266,15 +268,24 @@ def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tupl
     exemplar = session.get(m.Exemplar, data.pair.exemplar_id)
     assert exemplar is not None
     reference = _reference_pair(session, ctx, exemplar.id) or data.pair
-    key = ctx.lighting_key(reference.id, data.source_hash if reference.id == data.pair.id
-                           else _source_hash(session, ctx, reference.id))
     stored = (exemplar.meta or {}).get(LIGHTING_KEY)
-    if isinstance(stored, dict) and stored.get("key") == key:
-        return stored, False
-    ref_data = data if reference.id == data.pair.id else load_pair(session, ctx, reference)
-    record = {**lighting_estimate(ctx, ref_data), "pair_id": reference.id, "key": key}
-    exemplar.meta = {**(exemplar.meta or {}), LIGHTING_KEY: record}
-    return record, True
+    for pair in dict.fromkeys((reference, data.pair)):  # the pair itself when its reference cannot be lit
+        key = ctx.lighting_key(pair.id, data.source_hash if pair.id == data.pair.id
+                               else _source_hash(session, ctx, pair.id))
+        if isinstance(stored, dict) and stored.get("key") == key:
+            return stored, False
+        try:
+            light = lighting_estimate(ctx, data if pair.id == data.pair.id else load_pair(session, ctx, pair))
+        except ValueError as exc:
+            if pair.id == data.pair.id:
+                raise
+            log.warning("fit: exemplar %s: its reference pair %s cannot be lit (%s); lighting pair %s instead",
+                        exemplar.id, pair.id, exc, data.pair.id)
+            continue
+        record = {**light, "pair_id": pair.id, "key": key}
+        exemplar.meta = {**(exemplar.meta or {}), LIGHTING_KEY: record}
+        return record, True
+    raise AssertionError("unreachable: the pair itself is always tried")
 
 
 # -- one pair --------------------------------------------------------------------------------------------
@@ -287,6 +298,8 @@ def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candid
 def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
                      light: dict[str, Any]) -> tuple[dict[int, dict[int, float | None]], float]:
     """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`)."""
+    if not candidates:
+        return {}, float(light.get("exposure", 1.0))
     envmap = ctx.envmap_spec(lt.Hypothesis(int(light.get("envmap_id") or 0), float(light.get("rotation", 0.0))))
     renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
     return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
@@ -362,7 +375,8 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                 assert pair is not None
                 data = load_pair(session, ctx, pair)
                 candidates = candidates_of(ctx, data)
-                light, computed = exemplar_lighting(session, ctx, data)
+                # nothing observed: the ranking is copied, no lighting needed
+                light, computed = exemplar_lighting(session, ctx, data) if candidates else ({"key": None}, False)
                 summary.lightings += int(computed)
                 digest = pair_hash(ctx, data, candidates, str(light["key"]))
                 if _stored_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
