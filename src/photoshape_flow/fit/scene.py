@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import cv2
@@ -103,7 +104,9 @@ class FitScene:
         """A render of the scene's shape in the frame, softened like the photo (linear RGB)."""
         return soften(frame.render(self.mesh, materials, self.camera, envmap), self.blur)
 
+    @cached_property
     def photo_stats(self) -> dict[int, Appearance]:
+        """Each observed part's statistics in the photo (parts too small for statistics absent)."""
         return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
 
 
@@ -125,10 +128,10 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
     Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
     closed-form fit of the per-part mean colours; its loss the pixel-weighted mean part distance.
     """
-    if not scene.photo_stats():
+    if not scene.photo_stats:
         raise ValueError("no observed part to light (every aligned part is too small)")
     ids = frame.part_ids(scene.mesh, scene.camera)
-    photo = scene.photo_stats()
+    photo = scene.photo_stats
     photo_means = lt.region_means(scene.photo_linear, scene.masks)
     rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
     scored = []
@@ -179,7 +182,7 @@ def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, 
 def candidate_distances(renders: CandidateRenders, scene: FitScene, exposure: float, weights: Weights,
                         erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
     """Part index -> {candidate material: distance to the photo} with the renders at `exposure`."""
-    photo = scene.photo_stats()
+    photo = scene.photo_stats
     out: dict[int, dict[int, float | None]] = {i: {} for i in renders.where}
     for k, linear in enumerate(renders.renders):
         shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}

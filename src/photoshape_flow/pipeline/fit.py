@@ -256,10 +256,11 @@ def _reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pa
     ).scalar_one_or_none()
 
 
-def _source_hash(session: Session, ctx: FitContext, pair_id: int) -> str | None:
+def rows_hash(session: Session, pair_id: int, method_key: str) -> str | None:
+    """The params_hash a pair's rows of `method_key` carry (None: no rows)."""
     return session.execute(
         sa.select(m.Assignment.params_hash).where(m.Assignment.pair_id == pair_id,
-                                                  m.Assignment.method_key == ctx.source_key).limit(1)
+                                                  m.Assignment.method_key == method_key).limit(1)
     ).scalar_one_or_none()
 
 
@@ -271,7 +272,7 @@ def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tupl
     stored = (exemplar.meta or {}).get(LIGHTING_KEY)
     for pair in dict.fromkeys((reference, data.pair)):  # the pair itself when its reference cannot be lit
         key = ctx.lighting_key(pair.id, data.source_hash if pair.id == data.pair.id
-                               else _source_hash(session, ctx, pair.id))
+                               else rows_hash(session, pair.id, ctx.source_key))
         if isinstance(stored, dict) and stored.get("key") == key:
             return stored, False
         try:
@@ -346,13 +347,6 @@ def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | No
     return list(session.execute(query).scalars())
 
 
-def _stored_hash(session: Session, pair_id: int, method_key: str) -> str | None:
-    return session.execute(
-        sa.select(m.Assignment.params_hash).where(m.Assignment.pair_id == pair_id,
-                                                  m.Assignment.method_key == method_key).limit(1)
-    ).scalar_one_or_none()
-
-
 def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: Settings | None = None,
             renderer: Any = None, classifier_id: int | None = None) -> FitSummary:
     """Fit every pending pair (see the module docstring); resumable and idempotent, one bad pair never stops it."""
@@ -379,7 +373,7 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                 light, computed = exemplar_lighting(session, ctx, data) if candidates else ({"key": None}, False)
                 summary.lightings += int(computed)
                 digest = pair_hash(ctx, data, candidates, str(light["key"]))
-                if _stored_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
+                if rows_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
                         session, stage, [str(pair_id)], params_hash=digest,
                         lease_seconds=settings.claim_lease_seconds, retry_failed=True):
                     summary.pairs_skipped += 1
