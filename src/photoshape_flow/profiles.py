@@ -102,6 +102,7 @@ class FitConfig:
     size: int = 128  # render and comparison resolution (pixels, square exemplar frame)
     spp: int = 16
     rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
+    lighting_envmaps: int = 4  # more training envmaps than this: screen all at 2 azimuths, search the best 4
     lighting_rounds: int = 1  # 2+: then select, and light the winners again (no gain measured yet)
     erode: int = 1  # pixels shrunk off each part mask before comparing
     blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing

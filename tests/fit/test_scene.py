@@ -8,13 +8,13 @@ is never exact). The render loops of `fit.scene` must recover what made it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 from tests.render.conftest import write_exr
 
-from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.scene import (
@@ -41,6 +41,7 @@ MATERIALS = {  # id -> (substance, albedo sRGB, roughness, metallic)
 }
 TRUTH = {1: 1, 2: 2}  # part index -> material id
 EXPOSURE = 0.7
+TRUE_ENVMAP = 12
 
 
 def _spec(material_id: int | None) -> MaterialSpec | None:
@@ -64,16 +65,16 @@ def scene(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-
     from photoshape_flow.render import Renderer
 
     folder = tmp_path_factory.mktemp("studios")
-    studios = {10: _studio(folder / "warm-left.exr", 4, (9.0, 6.0, 3.0)),
-               11: _studio(folder / "cool-right.exr", 20, (3.0, 5.0, 9.0)),
-               12: _studio(folder / "white-top.exr", 12, (6.0, 6.0, 6.0))}
+    studios = {10: _studio(folder / "cool-right.exr", 20, (3.0, 5.0, 9.0)),
+               11: _studio(folder / "white-top.exr", 12, (6.0, 6.0, 6.0)),
+               TRUE_ENVMAP: _studio(folder / "warm-left.exr", 4, (9.0, 6.0, 3.0))}  # the truth last
     mesh = normalise_to_unit_cube([box_part(1, (-0.3, 0.0, 0.0), (0.25, 0.45, 0.25)),
                                    box_part(2, (0.3, 0.0, 0.0), (0.25, 0.45, 0.25))])
     camera = Camera(math.radians(30), math.radians(20), 2.4, 45.0)
     renderer = Renderer()
     truth = [_spec(TRUTH[p.index]) for p in mesh.parts]
     photo_frame = FrameRenderer(renderer, 64, 32)
-    photo = linear_to_srgb(EXPOSURE * photo_frame.render(mesh, truth, camera, studios[10]))
+    photo = linear_to_srgb(EXPOSURE * photo_frame.render(mesh, truth, camera, studios[TRUE_ENVMAP]))
     photo = (photo * 255 + 0.5).astype(np.uint8)
     labels = np.roll(photo_frame.part_ids(mesh, camera), 1, axis=1)
     return renderer, mesh, camera, studios, photo, labels
@@ -88,13 +89,15 @@ def _fit_scene(scene, size: int = 48):  # type: ignore[no-untyped-def]
     return FrameRenderer(renderer, size, 4), FitScene.from_photo(mesh, camera, photo, labels, [1, 2])
 
 
+def _rotatable(studios: dict[int, EnvmapSpec]) -> dict[int, Callable[[float], EnvmapSpec]]:
+    return {e: (lambda rotation, path=spec.path: EnvmapSpec(path, rotation=rotation)) for e, spec in studios.items()}
+
+
 def test_lighting_estimate_picks_the_photo_envmap_and_its_exposure(scene) -> None:  # type: ignore[no-untyped-def]
     frame, fit_scene = _fit_scene(scene)
-    studios = scene[3]
     truth = [_spec(TRUTH[p.index]) for p in fit_scene.mesh.parts]
-    hypotheses = [(lt.Hypothesis(e, 0.0), spec) for e, spec in reversed(studios.items())]  # the truth last
-    best, exposure, loss = estimate_lighting(frame, fit_scene, truth, hypotheses, Weights())
-    assert best.envmap_id == 10
+    best, exposure, loss, renders = estimate_lighting(frame, fit_scene, truth, _rotatable(scene[3]), 1, Weights())
+    assert (best.envmap_id, renders) == (TRUE_ENVMAP, 3)
     assert exposure == pytest.approx(EXPOSURE, rel=0.15) and loss < 0.5
 
 
@@ -103,7 +106,7 @@ def test_the_true_material_scores_best_among_other_substances_and_colours(scene)
     frame, fit_scene = _fit_scene(scene)
     candidates = {i: [Candidate(mid, MATERIALS[mid][0], 1.0 / len(MATERIALS), "ranking")
                       for mid in sorted(MATERIALS, reverse=True)] for i in (1, 2)}
-    renders = render_candidates(frame, fit_scene, {1: 6, 2: 6}, candidates, _spec, scene[3][10])
+    renders = render_candidates(frame, fit_scene, {1: 6, 2: 6}, candidates, _spec, scene[3][TRUE_ENVMAP])
     assert len(renders.renders) == len(MATERIALS)  # both parts switch candidate in the same render
     measured, exposure = select_with_exposure(renders, fit_scene, candidates, 2.5 * EXPOSURE, Weights(), 0.3)
     assert exposure == pytest.approx(EXPOSURE, rel=0.15)
@@ -114,10 +117,12 @@ def test_the_true_material_scores_best_among_other_substances_and_colours(scene)
         assert ranked[0].cost < 0.8 * ranked[1].cost
 
 
-def test_lighting_estimate_recovers_the_rotation(scene) -> None:  # type: ignore[no-untyped-def]
+def test_lighting_estimate_recovers_the_rotation_also_after_screening(scene) -> None:  # type: ignore[no-untyped-def]
     frame, fit_scene = _fit_scene(scene)
     truth = [_spec(TRUTH[p.index]) for p in fit_scene.mesh.parts]
-    hypotheses = [(lt.Hypothesis(e, r), EnvmapSpec(spec.path, rotation=r))
-                  for e, spec in scene[3].items() for r in lt.rotations(4)][::-1]  # the truth last
-    best, _, _ = estimate_lighting(frame, fit_scene, truth, hypotheses, Weights())
-    assert (best.envmap_id, best.rotation) == (10, 0.0)
+    studios = _rotatable(scene[3])
+    best, _, _, renders = estimate_lighting(frame, fit_scene, truth, studios, 4, Weights())
+    assert (best.envmap_id, best.rotation, renders) == (TRUE_ENVMAP, 0.0, 12)
+    # screened: every envmap at 0 and pi, then only the best one at all four rotations
+    best, _, _, renders = estimate_lighting(frame, fit_scene, truth, studios, 4, Weights(), keep=1)
+    assert (best.envmap_id, best.rotation, renders) == (TRUE_ENVMAP, 0.0, 3 * 2 + 2)

@@ -120,10 +120,10 @@ def region_distances(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appea
     return out
 
 
-def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
-                      hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights,
-                      erode_pixels: int = 1) -> tuple[lt.Hypothesis, float, float]:
-    """(hypothesis, exposure, loss) of the (envmap spec) hypothesis that best explains the photo.
+def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
+                   hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights,
+                   erode_pixels: int = 1) -> list[tuple[lt.Hypothesis, float, float]]:
+    """(hypothesis, exposure, loss) of each (hypothesis, envmap spec): how well it explains the photo.
 
     Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
     closed-form fit of the per-part mean colours; its loss the pixel-weighted mean part distance.
@@ -143,7 +143,36 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
         sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
         loss = sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values()) if sizes else math.inf
         scored.append((hypothesis, scale, loss))
-    return lt.best(scored)
+    return scored
+
+
+def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
+                      envmaps: Mapping[int, Callable[[float], Any]], rotations: int, weights: Weights,
+                      keep: int | None = None, erode_pixels: int = 1) -> tuple[lt.Hypothesis, float, float, int]:
+    """(hypothesis, exposure, loss, renders) of the envmap and rotation that best explain the photo.
+
+    `envmaps`: envmap id -> its render spec at a rotation. Every envmap is tried at `rotations`
+    azimuths; with more envmaps than `keep`, all are first screened at (up to) two azimuths and only
+    the `keep` best are searched at every azimuth, so the cost grows with the library by two renders
+    per envmap rather than `rotations`.
+    """
+    angles = lt.rotations(rotations)
+    scored: dict[lt.Hypothesis, tuple[lt.Hypothesis, float, float]] = {}
+
+    def run(hypotheses: list[lt.Hypothesis]) -> None:
+        fresh = [h for h in hypotheses if h not in scored]
+        for item in score_lighting(frame, scene, materials, [(h, envmaps[h.envmap_id](h.rotation)) for h in fresh],
+                                   weights, erode_pixels):
+            scored[item[0]] = item
+
+    ids = sorted(envmaps)
+    if keep is not None and 0 < keep < len(ids):
+        run([lt.Hypothesis(e, r) for e in ids for r in angles[:: max(1, len(angles) // 2)][:2]])
+        best_of = {e: min(loss for h, _, loss in scored.values() if h.envmap_id == e) for e in ids}
+        ids = sorted(ids, key=lambda e: (best_of[e], e))[:keep]
+    run([lt.Hypothesis(e, r) for e in ids for r in angles])
+    h, scale, loss = lt.best(list(scored.values()))
+    return h, scale, loss, len(scored)
 
 
 @dataclass

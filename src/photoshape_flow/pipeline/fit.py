@@ -26,6 +26,7 @@ import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,6 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.scene import (
@@ -140,11 +140,12 @@ class FitContext:
             self._specs[material_id] = material_spec(self.material_rows[material_id], self.store)
         return self._specs[material_id]
 
-    def envmap_spec(self, hypothesis: lt.Hypothesis) -> Any:
+    def envmap_spec(self, envmap_id: int | None, rotation: float = 0.0) -> Any:
+        """The render spec of a training envmap at a rotation (None: unknown id, the constant white sky)."""
         from photoshape_flow.render import EnvmapSpec
 
-        blob = self.envmaps.get(hypothesis.envmap_id)
-        return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=hypothesis.rotation)
+        blob = self.envmaps.get(envmap_id) if envmap_id is not None else None
+        return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
 
     def mesh(self, shape: m.Shape) -> Any:
         from photoshape_flow.geometry.mesh import ShapeMesh
@@ -222,8 +223,8 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
     materials under the current estimate and lights those winners again, so a wrong first material
     does not fix the lighting for good.
     """
-    hypotheses = [lt.Hypothesis(e, r) for e in sorted(ctx.envmaps) for r in lt.rotations(ctx.cfg.rotations)]
-    hypotheses = hypotheses or [lt.Hypothesis(0, 0.0)]  # no envmap: the constant white sky
+    # envmap id -> its spec at a rotation; no envmap at all: the constant white sky (id 0)
+    envmaps = {e: partial(ctx.envmap_spec, e) for e in sorted(ctx.envmaps)} or {0: partial(ctx.envmap_spec, 0)}
     chosen = data.rank1()
     light: dict[str, Any] = {}
     for round_ in range(max(1, ctx.cfg.lighting_rounds)):
@@ -233,12 +234,10 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
             chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.cfg.prior_weight)[0].candidate.material_id
                                    for i, c in candidates.items() if c}}
         materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
-        h, scale, loss = estimate_lighting(ctx.frame, data.scene, materials,
-                                           [(h, ctx.envmap_spec(h)) for h in hypotheses], weights_of(ctx.cfg),
-                                           ctx.cfg.erode)
+        h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
+                                                    weights_of(ctx.cfg), ctx.cfg.lighting_envmaps, ctx.cfg.erode)
         light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
-                 "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": len(hypotheses),
-                 "rounds": round_ + 1}
+                 "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
     return light
 
 
@@ -301,7 +300,7 @@ def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list
     """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`)."""
     if not candidates:
         return {}, float(light.get("exposure", 1.0))
-    envmap = ctx.envmap_spec(lt.Hypothesis(int(light.get("envmap_id") or 0), float(light.get("rotation", 0.0))))
+    envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
     renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
     return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
                                 weights_of(ctx.cfg), ctx.cfg.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
