@@ -95,7 +95,7 @@ class InferenceConfig:
 class FitConfig:
     """Fit by rendering (`pipeline.fit`): candidates per part, render quality, lighting search, cost weights.
 
-    The weights are hand-set, not yet fitted on validation renders (docs/decisions.md D26).
+    The weights are hand-set, not yet fitted on validation renders (docs/decisions.md D28).
     """
 
     top_k: int = 5  # candidates from the current ranking, per part

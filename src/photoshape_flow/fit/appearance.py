@@ -10,7 +10,7 @@ a few pixels, the shape is only a look-alike), so the distance compares distribu
 
 Each term is divided by a fixed scale (a just-noticeable CIELAB difference of about 10 for colour,
 5 L* units per pixel for gradients) so the weights of `Weights` are comparable; the weights are
-profile fields (`FitConfig`), not fitted yet (docs/decisions.md D26). Masks are eroded first so
+profile fields (`FitConfig`), not fitted yet (docs/decisions.md D28). Masks are eroded first so
 boundary pixels, where the alignment error and anti-aliasing live, do not count.
 """
 
