@@ -112,6 +112,9 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
         assert copied and {r.params["fit"]["source"] for r in copied} == {"ranking-only"}
         lit_by = session.get(m.Exemplar, blind.exemplar_id).meta["fit_lighting"]["pair_id"]
         assert lit_by != blind.id and lit_by in pairs  # the blind reference could not light its exemplar
+        planted = {(a.pair_id, a.part_id): a.material_id for a in session.execute(
+            sa.select(m.Assignment).where(m.Assignment.method == "classifier", m.Assignment.rank == 1,
+                                          m.Assignment.pair_id.in_(pairs))).scalars()}
         rows = session.execute(sa.select(m.Assignment).where(m.Assignment.method == "fit",
                                                              m.Assignment.pair_id.in_(pairs))
                                .order_by(m.Assignment.pair_id, m.Assignment.part_id, m.Assignment.rank)).scalars().all()
@@ -126,6 +129,8 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
             assert costs == sorted(costs) and {"ranking", "colour"} <= {r.params["fit"]["source"] for r in ranked}
             assert untrained in {r.material_id for r in ranked}  # a material the classifier never saw competes
         top1 = np.mean([ranked[0].material_id == truth_of[key] for key, ranked in observed.items()])
+        moved = sum(ranked[0].material_id != planted[key] for key, ranked in by_part.items())
+        assert first.details[f"fit:{rows[0].classifier_id}"]["parts_changed"] == moved > 0
         # the planted ranking's top-1 is always wrong; fit's was right on 7 of 13 parts when written
         assert len(observed) >= 6 and top1 >= 0.4, top1
         lit = {e.id: e.meta["fit_lighting"] for e in session.execute(sa.select(m.Exemplar)).scalars()

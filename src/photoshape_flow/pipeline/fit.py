@@ -69,6 +69,7 @@ class FitSummary:
     pairs_failed: list[tuple[int, str]] = field(default_factory=list)
     rows: int = 0
     lightings: int = 0  # lighting estimates computed (not reused)
+    changed: int = 0  # parts whose first material differs from the classifier's
 
 
 def weights_of(cfg: FitConfig) -> Weights:
@@ -333,6 +334,12 @@ def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candida
     return out
 
 
+def changed_parts(data: PairData, rows: Sequence[m.Assignment]) -> int:
+    """How many parts' first material the fit rows change from the classifier's (what a run reports)."""
+    first = {ranked[0].part_id: ranked[0].material_id for ranked in data.rows.values() if ranked}
+    return sum(1 for r in rows if r.rank == 1 and r.material_id != first.get(r.part_id))
+
+
 # -- the run ---------------------------------------------------------------------------------------------
 def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | None = None) -> list[int]:
     """Active, aligned pairs with rows of `source_key`, in id order."""
@@ -385,12 +392,14 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                 claims.complete(session, stage, [str(pair_id)])
             summary.pairs_done += 1
             summary.rows += len(rows)
+            summary.changed += changed_parts(data, rows)
         except Exception as exc:  # one bad pair never stops the batch
             reason = f"{type(exc).__name__}: {exc}"
             log.warning("fit: pair %s failed: %s", pair_id, reason)
             summary.pairs_failed.append((pair_id, reason))
             with session_scope(url) as session:
                 claims.fail(session, stage, str(pair_id), reason)
-    log.info("fit %s: %d pairs, %d rows, %d skipped, %d failed, %d lighting estimates", ctx.method_key,
-             summary.pairs_done, summary.rows, summary.pairs_skipped, len(summary.pairs_failed), summary.lightings)
+    log.info("fit %s: %d pairs, %d rows, %d parts changed, %d skipped, %d failed, %d lighting estimates",
+             ctx.method_key, summary.pairs_done, summary.rows, summary.changed, summary.pairs_skipped,
+             len(summary.pairs_failed), summary.lightings)
     return summary
