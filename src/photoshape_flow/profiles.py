@@ -92,6 +92,29 @@ class InferenceConfig:
 
 
 @dataclass(frozen=True)
+class FitConfig:
+    """Fit by rendering (`pipeline.fit`): candidates per part, render quality, lighting search, cost weights.
+
+    The weights are hand-set, not yet fitted on validation renders (docs/decisions.md D28).
+    """
+
+    top_k: int = 5  # candidates from the current ranking, per part
+    size: int = 128  # render and comparison resolution (pixels, square exemplar frame)
+    spp: int = 16
+    rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
+    lighting_envmaps: int = 4  # more training envmaps than this: screen all at 2 azimuths, search the best 4
+    lighting_rounds: int = 1  # 2+: then select, and light the winners again (no gain measured yet)
+    erode: int = 1  # pixels shrunk off each part mask before comparing
+    blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
+    exposure_rounds: int = 3  # exposure re-solved with the winners, then re-selected (no new renders)
+    color_weight: float = 1.0  # CIELAB mean
+    contrast_weight: float = 0.5  # CIELAB standard deviation
+    gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales
+    prior_weight: float = 0.3  # times -log(ranking prior)
+    prior_floor: float = 0.02  # prior of candidates the ranking did not propose
+
+
+@dataclass(frozen=True)
 class PublishConfig:
     """Which pairs become PhotoShapes and at what quality they are rendered and exported."""
 
@@ -119,6 +142,7 @@ class Profile:
     training_renders: TrainingRendersConfig = field(default_factory=TrainingRendersConfig)
     training: ClassifierConfig = CLASSIFIER_PRESETS["cpu"]
     inference: InferenceConfig = field(default_factory=InferenceConfig)
+    fit: FitConfig = field(default_factory=FitConfig)
     publish: PublishConfig = field(default_factory=PublishConfig)
 
     def stage_config(self, stage: str) -> Any:
@@ -142,6 +166,7 @@ PROFILES: dict[str, Profile] = {
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
         training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
+        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2),
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
     ),
     "small": Profile(
@@ -151,6 +176,7 @@ PROFILES: dict[str, Profile] = {
         substances=SubstancesConfig(bootstrap_count=160, size=96, spp=16, network=replace(_CPU_SUBSTANCES, epochs=20)),
         training_renders=TrainingRendersConfig(count=320, size=96, spp=16),
         training=replace(_CPU_CLASSIFIER, epochs=4),
+        fit=FitConfig(size=96, spp=8, rotations=4),
         publish=PublishConfig(max_rank=1, views=8, size=160, spp=32),
     ),
     "medium": Profile(
@@ -161,6 +187,7 @@ PROFILES: dict[str, Profile] = {
                                     network=replace(_CPU_SUBSTANCES, epochs=60)),
         training_renders=TrainingRendersConfig(count=3000, size=128, spp=32),
         training=replace(_CPU_CLASSIFIER, epochs=12, max_steps_per_epoch=80, image_size=128),
+        fit=FitConfig(size=128, spp=8, rotations=4),
         publish=PublishConfig(max_rank=1, views=8, size=256, spp=64),
     ),
     "default": Profile(name="default"),
@@ -172,6 +199,7 @@ PROFILES: dict[str, Profile] = {
         training_renders=TrainingRendersConfig(count=156000, size=384, spp=256),
         training=CLASSIFIER_PRESETS["paper"],
         inference=InferenceConfig(top_k=10),
+        fit=FitConfig(top_k=10, size=256, spp=32, rotations=12),
         publish=PublishConfig(max_rank=12, size=1280, spp=256),
     ),
 }

@@ -53,7 +53,7 @@ def test_db_upgrade_current_and_status(settings_env: Path) -> None:
     assert "counts assume profile default (no run recorded yet; publish: pairs up to rank 12)" in flat
     assert "rejected" in flat
     for stage in ("ingest", "coarse-alignment", "fine-alignment", "substances", "training-renders", "training",
-                  "inference", "publish"):
+                  "inference", "fit", "publish"):
         assert stage in status.output
     assert invoke("db", "downgrade", "base").exit_code == 0
     assert "behind head" in invoke("db", "current").output

@@ -68,7 +68,7 @@ def test_pipeline_flow_runs_every_stage_on_tiny_demo(tiny_demo: Path, tmp_path: 
         data = asyncio.run(artifacts())
         keys = set(data)
     assert list(result["seconds"]) == ["ingest", "coarse-alignment", "fine-alignment", "substances",
-                                       "training-renders", "training", "inference", "publish"]
+                                       "training-renders", "training", "inference", "fit", "publish"]
     assert {"photoshape-run-summary", "photoshape-candidates", "fine-alignment-progress"} <= keys
     # the loops inside the tasks report their item counts too (the CLI's progress, as artifacts)
     assert data["fine-alignment-pairs-items"] == 100.0 and data["publish-pairs-items"] == 100.0, sorted(keys)

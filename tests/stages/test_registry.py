@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from photoshape_flow.stages import REGISTRY, STAGE_NAMES, STAGES, Blocked, StageContext, StageReport, WorkUnit
 
 PIPELINE_ORDER = ("ingest", "coarse-alignment", "fine-alignment", "substances", "training-renders", "training",
-                  "inference", "publish")
+                  "inference", "fit", "publish")
 
 
 def test_registry_lists_every_stage_once_in_pipeline_order() -> None:
@@ -25,7 +25,7 @@ def test_registry_lists_every_stage_once_in_pipeline_order() -> None:
         assert callable(stage.run) and callable(stage.progress) and stage.writes and stage.description
         assert stage.fans_out == (stage.plan is not None)
     assert {s.name for s in REGISTRY if s.fans_out} == {"coarse-alignment", "fine-alignment", "substances",
-                                                        "training-renders", "inference", "publish"}
+                                                        "training-renders", "inference", "fit", "publish"}
 
 
 def test_every_stage_has_a_flow_and_a_deployment_from_the_registry() -> None:

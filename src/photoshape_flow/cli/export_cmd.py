@@ -18,8 +18,8 @@ def export(
     out: Path = typer.Option(..., "--out", "-o", help="Folder; each PhotoShape goes into <pair>-<method_key>/."),
     method: str = typer.Option(
         "classifier", "--method", "-m",
-        help="classifier (each pair's newest classifier), builtin, no-classifier, color-match, or an exact "
-        "method key such as classifier:3.",
+        help="classifier (each pair's newest classifier), fit (its re-ranking by rendering), builtin, "
+        "no-classifier, color-match, or an exact method key such as classifier:3 or fit:3.",
     ),
     formats: str = typer.Option(",".join(DEFAULT_FORMATS), "--format", "-f",
                                 help=f"Comma-separated: {', '.join(EXPORTERS)}."),

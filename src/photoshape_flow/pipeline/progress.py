@@ -163,6 +163,12 @@ def inference_progress(session: Session) -> StageProgress:
     return _pairs_progress(session, "inference", _inferred(), _with_substance())
 
 
+def fit_progress(session: Session) -> StageProgress:
+    """Pairs with `fit` rows; pending: pairs the classifier ranked without them."""
+    fitted = sa.select(m.Assignment.pair_id).where(m.Assignment.method == "fit")
+    return _pairs_progress(session, "fit", fitted, _inferred())
+
+
 def publish_progress(session: Session) -> StageProgress:
     """Published pairs; pending: inferred pairs up to the assumed profile's `publish.max_rank` not yet tried."""
     pairs = active_pairs()

@@ -3,7 +3,7 @@
     >>> import photoshape_flow.stages as s
     >>> [stage.name for stage in s.REGISTRY]  # doctest: +NORMALIZE_WHITESPACE
     ['ingest', 'coarse-alignment', 'fine-alignment', 'substances', 'training-renders', 'training',
-     'inference', 'publish']
+     'inference', 'fit', 'publish']
 """
 
 from photoshape_flow.pipeline.runs import last_run_profile

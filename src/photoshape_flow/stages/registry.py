@@ -20,6 +20,7 @@ from photoshape_flow.profiles import Profile
 from photoshape_flow.stages import (
     coarse_alignment,
     fine_alignment,
+    fit,
     inference,
     ingest,
     publish,
@@ -103,6 +104,12 @@ REGISTRY: tuple[Stage, ...] = (
         "inference", "Ranked materials per part for the classifier and the baselines (section 6.1).",
         inference.run, reads=("alignment", "part_substance", "classifier", "material"), writes=("assignment",),
         progress=progress.inference_progress, plan=inference.plan, batch_size=64, claims_itself=True,
+    ),
+    Stage(
+        "fit", "Materials chosen by rendering each pair against its photo (lighting, candidates, scores).",
+        fit.run, reads=("assignment", "alignment", "exemplar", "material", "envmap", "shape"),
+        writes=("assignment", "exemplar"), progress=progress.fit_progress, plan=fit.plan, batch_size=16,
+        claims_itself=True,
     ),
     Stage(
         "publish", "PhotoShape renders and exports of the best pairs, then the gallery.",

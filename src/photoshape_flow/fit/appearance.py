@@ -1,0 +1,115 @@
+"""Appearance statistics of one image region, and a distance between two regions that tolerates misalignment.
+
+The rendered part and the photo's part never cover the same pixels exactly (fine alignment is off by
+a few pixels, the shape is only a look-alike), so the distance compares distributions, not pixels:
+
+- colour: the mean and the standard deviation of CIELAB over the region (the material's albedo
+  under the estimated lighting, and its shading/texture contrast);
+- texture: the mean and the standard deviation of the gradient magnitude of L* at two scales (full
+  resolution and half), which separate smooth plastic or metal from wood grain or woven fabric.
+
+Each term is divided by a fixed scale (a just-noticeable CIELAB difference of about 10 for colour,
+5 L* units per pixel for gradients) so the weights of `Weights` are comparable; the weights are
+profile fields (`FitConfig`), not fitted yet (docs/decisions.md D32). Masks are eroded first so
+boundary pixels, where the alignment error and anti-aliasing live, do not count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+LAB_SCALE = 10.0  # CIELAB units per unit of distance
+GRADIENT_SCALE = 5.0  # L* per pixel per unit of distance
+MIN_PIXELS = 12  # a region smaller than this has no statistics
+
+
+@dataclass(frozen=True)
+class Weights:
+    """How much each statistic counts in `distance` (the `FitConfig` weights)."""
+
+    color: float = 1.0  # CIELAB mean
+    contrast: float = 0.5  # CIELAB standard deviation
+    gradient: float = 0.5  # L* gradient-magnitude statistics, two scales
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """Statistics of one region: CIELAB mean and std (3 each), gradient mean/std at two scales (4)."""
+
+    lab_mean: np.ndarray
+    lab_std: np.ndarray
+    gradient: np.ndarray
+    pixels: int
+
+
+def srgb_float(rgb: np.ndarray) -> np.ndarray:
+    """An sRGB image (uint8 or float 0..1) as float32 in 0..1."""
+    rgb = np.asarray(rgb)[..., :3]
+    if rgb.dtype == np.uint8:
+        return rgb.astype(np.float32) / 255.0
+    return np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+def to_lab(rgb: np.ndarray) -> np.ndarray:
+    """CIELAB (L* 0..100, a*, b*) of an sRGB image (uint8 or float 0..1), D65."""
+    return cv2.cvtColor(srgb_float(rgb), cv2.COLOR_RGB2LAB)
+
+
+def erode(mask: np.ndarray, pixels: int) -> np.ndarray:
+    """The mask shrunk by `pixels`; the unshrunk mask when nothing would be left."""
+    mask = np.asarray(mask, bool)
+    if pixels <= 0 or not mask.any():
+        return mask
+    kernel = np.ones((2 * pixels + 1, 2 * pixels + 1), np.uint8)
+    eroded = cv2.erode(mask.astype(np.uint8), kernel) > 0
+    return eroded if eroded.sum() >= MIN_PIXELS else mask
+
+
+def soften(image: np.ndarray, sigma: float) -> np.ndarray:
+    """A Gaussian blur of `sigma` pixels (none when sigma <= 0).
+
+    Applied to the render and the photo alike before any statistic: a product photo is softer than a
+    path-traced render (lens, demosaicing, JPEG, a resize) and a low-spp render is noisier than a
+    photo; both differences live at the finest scale, where they would swamp the texture statistics.
+    """
+    if sigma <= 0:
+        return image
+    return cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), sigmaX=float(sigma))
+
+
+def _gradient_magnitude(lightness: np.ndarray) -> np.ndarray:
+    gx = cv2.Sobel(lightness, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(lightness, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    return np.sqrt(gx * gx + gy * gy)
+
+
+def appearance(lab: np.ndarray, mask: np.ndarray) -> Appearance | None:
+    """Statistics of the region `mask` of a CIELAB image (`to_lab`); None when it is too small."""
+    mask = np.asarray(mask, bool)
+    n = int(mask.sum())
+    if n < MIN_PIXELS:
+        return None
+    pixels = lab[mask].astype(np.float64)
+    lightness = np.ascontiguousarray(lab[..., 0], np.float32)
+    # outside the region the gradient would see the background edge: fill it with the region's mean
+    filled = np.where(mask, lightness, np.float32(pixels[:, 0].mean()))
+    fine = _gradient_magnitude(filled)[erode(mask, 1)]
+    half = cv2.resize(filled, (max(1, filled.shape[1] // 2), max(1, filled.shape[0] // 2)),
+                      interpolation=cv2.INTER_AREA)
+    half_mask = cv2.resize(mask.astype(np.uint8), (half.shape[1], half.shape[0]),
+                           interpolation=cv2.INTER_NEAREST) > 0
+    coarse = _gradient_magnitude(half)[erode(half_mask, 1)] if half_mask.any() else fine
+    coarse = coarse if coarse.size else fine
+    gradient = np.array([fine.mean(), fine.std(), coarse.mean(), coarse.std()], np.float64)
+    return Appearance(pixels.mean(axis=0), pixels.std(axis=0), gradient, n)
+
+
+def distance(a: Appearance, b: Appearance, weights: Weights = Weights()) -> float:
+    """Weighted distance between two regions' statistics (0: identical statistics)."""
+    color = float(np.linalg.norm(a.lab_mean - b.lab_mean)) / LAB_SCALE
+    contrast = float(np.linalg.norm(a.lab_std - b.lab_std)) / LAB_SCALE
+    gradient = float(np.linalg.norm(a.gradient - b.gradient)) / GRADIENT_SCALE
+    return weights.color * color + weights.contrast * contrast + weights.gradient * gradient

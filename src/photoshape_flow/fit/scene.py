@@ -1,0 +1,249 @@
+"""A pair as the fit sees it (photo, aligned regions, shape, camera) and the renders that score it; no database.
+
+`FrameRenderer` renders a shape at a pair's camera in the exemplar's frame (the tight square crop of
+the silhouette, as fine alignment frames the part map). `estimate_lighting` and `measure_candidates`
+are the two render loops of the fit stage; they take render specs and return numbers, so tests run
+them on generated scenes and `pipeline.fit` on the database's pairs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import cv2
+import numpy as np
+
+from photoshape_flow.align.partmap import resize_labels, zoom_to_fit
+from photoshape_flow.fit import lighting as lt
+from photoshape_flow.fit.appearance import Appearance, Weights, appearance, distance, erode, soften, to_lab
+from photoshape_flow.fit.candidates import Candidate
+from photoshape_flow.fit.select import render_slots
+from photoshape_flow.imaging.squares import crop_square, square_box
+
+OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
+
+
+class FrameRenderer:
+    """A shape rendered at a camera, cropped like the exemplar: the silhouette's square at `size` pixels."""
+
+    def __init__(self, renderer: Any, size: int, spp: int):
+        self.renderer = renderer
+        self.size = size
+        self.spp = spp
+        self._frames: dict[tuple[int, Any], tuple[Any, tuple[int, int, int], np.ndarray]] = {}
+
+    @property
+    def render_size(self) -> int:
+        return int(math.ceil(self.size * OVERSAMPLE))
+
+    def _frame(self, mesh: Any, camera: Any) -> tuple[Any, tuple[int, int, int], np.ndarray]:
+        key = (id(mesh), camera)
+        if key not in self._frames:
+            zoomed = zoom_to_fit(mesh, camera)
+            ids = self.renderer.part_ids(mesh, zoomed, size=self.render_size)
+            box = square_box(ids > 0)
+            if box is None:
+                raise ValueError("the shape is not visible at the pair's camera")
+            # one frame kept: pairs are fitted one after the other
+            self._frames = {key: (zoomed, box, resize_labels(crop_square(ids, *box, fill=0), self.size))}
+        return self._frames[key]
+
+    def part_ids(self, mesh: Any, camera: Any) -> np.ndarray:
+        """(size, size) part indices of the shape in the frame (0 = background)."""
+        return self._frame(mesh, camera)[2]
+
+    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
+        """(size, size, 3) linear radiance in the frame, un-premultiplied (background 0).
+
+        Un-premultiplied so that a thin part's edge pixels carry the part's colour, not a blend with
+        the (black) background: the photo's regions exclude its background instead (`FitScene`).
+        """
+        zoomed, box, _ = self._frame(mesh, camera)
+        result = self.renderer.beauty(mesh, list(materials), zoomed, envmap, size=self.render_size, spp=self.spp,
+                                      background="transparent", seed=0)
+        size = (self.size, self.size)
+        rgb = cv2.resize(crop_square(result.hdr, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
+        alpha = cv2.resize(crop_square(result.alpha, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
+        return np.where(alpha[..., None] > 0.05, rgb / np.maximum(alpha, 0.05)[..., None], 0.0).astype(np.float32)
+
+
+@dataclass
+class FitScene:
+    """What a render is compared with: the photo at the frame's size and each observed part's region in it."""
+
+    mesh: Any
+    camera: Any
+    photo_linear: np.ndarray  # (size, size, 3)
+    photo_lab: np.ndarray
+    masks: dict[int, np.ndarray]  # observed part index -> region of the photo (eroded)
+    blur: float = 0.0  # Gaussian sigma (pixels) applied to the photo and to every render (`soften`)
+
+    @classmethod
+    def from_photo(cls, mesh: Any, camera: Any, photo_srgb: np.ndarray, labels: np.ndarray,
+                   indices: Sequence[int], erode_pixels: int = 1, min_pixels: int = 12,
+                   blur: float = 0.0, foreground: np.ndarray | None = None) -> FitScene:
+        """`photo_srgb` uint8, `labels` (part index per pixel) and the photo's `foreground` at the same size.
+
+        A part's region is its labels inside the foreground (the aligned map spills onto the
+        background around thin parts), eroded; parts left with fewer than `min_pixels` are dropped.
+        """
+        inside = np.ones(labels.shape, bool) if foreground is None else np.asarray(foreground, bool)
+        masks = {}
+        for index in indices:
+            region = erode((labels == index) & inside, erode_pixels)
+            if int(region.sum()) >= min_pixels:
+                masks[index] = region
+        linear = soften(lt.photo_linear(photo_srgb), blur)
+        return cls(mesh, camera, linear, to_lab(lt.exposed_srgb(linear, 1.0)), masks, blur)
+
+    def render(self, frame: FrameRenderer, materials: Sequence[Any], envmap: Any) -> np.ndarray:
+        """A render of the scene's shape in the frame, softened like the photo (linear RGB)."""
+        return soften(frame.render(self.mesh, materials, self.camera, envmap), self.blur)
+
+    @cached_property
+    def photo_stats(self) -> dict[int, Appearance]:
+        """Each observed part's statistics in the photo (parts too small for statistics absent)."""
+        return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
+
+
+def region_distances(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appearance], indices: Sequence[int],
+                     weights: Weights, erode_pixels: int = 1) -> dict[int, float | None]:
+    """Per part: distance of its rendered region to its photo region (None when either is missing)."""
+    out: dict[int, float | None] = {}
+    for index in indices:
+        rendered = appearance(lab, erode(ids == index, erode_pixels))
+        out[index] = None if rendered is None or index not in photo else distance(rendered, photo[index], weights)
+    return out
+
+
+def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
+                   hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights,
+                   erode_pixels: int = 1) -> list[tuple[lt.Hypothesis, float, float]]:
+    """(hypothesis, exposure, loss) of each (hypothesis, envmap spec): how well it explains the photo.
+
+    Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
+    closed-form fit of the per-part mean colours; its loss the pixel-weighted mean part distance.
+    """
+    if not scene.photo_stats:
+        raise ValueError("no observed part to light (every aligned part is too small)")
+    ids = frame.part_ids(scene.mesh, scene.camera)
+    photo = scene.photo_stats
+    photo_means = lt.region_means(scene.photo_linear, scene.masks)
+    rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
+    scored = []
+    for hypothesis, envmap in hypotheses:
+        linear = scene.render(frame, materials, envmap)
+        scale = lt.exposure(lt.region_means(linear, rendered_masks), photo_means)
+        dists = region_distances(to_lab(lt.exposed_srgb(linear, scale)), ids, photo, sorted(scene.masks), weights,
+                                 erode_pixels)
+        sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
+        loss = sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values()) if sizes else math.inf
+        scored.append((hypothesis, scale, loss))
+    return scored
+
+
+def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
+                      envmaps: Mapping[int, Callable[[float], Any]], rotations: int, weights: Weights,
+                      keep: int | None = None, erode_pixels: int = 1) -> tuple[lt.Hypothesis, float, float, int]:
+    """(hypothesis, exposure, loss, renders) of the envmap and rotation that best explain the photo.
+
+    `envmaps`: envmap id -> its render spec at a rotation. Every envmap is tried at `rotations`
+    azimuths; with more envmaps than `keep`, all are first screened at (up to) two azimuths and only
+    the `keep` best are searched at every azimuth, so the cost grows with the library by two renders
+    per envmap rather than `rotations`.
+    """
+    angles = lt.rotations(rotations)
+    scored: dict[lt.Hypothesis, tuple[lt.Hypothesis, float, float]] = {}
+
+    def run(hypotheses: list[lt.Hypothesis]) -> None:
+        fresh = [h for h in hypotheses if h not in scored]
+        for item in score_lighting(frame, scene, materials, [(h, envmaps[h.envmap_id](h.rotation)) for h in fresh],
+                                   weights, erode_pixels):
+            scored[item[0]] = item
+
+    ids = sorted(envmaps)
+    if keep is not None and 0 < keep < len(ids):
+        run([lt.Hypothesis(e, r) for e in ids for r in angles[:: max(1, len(angles) // 2)][:2]])
+        best_of = {e: min(loss for h, _, loss in scored.values() if h.envmap_id == e) for e in ids}
+        ids = sorted(ids, key=lambda e: (best_of[e], e))[:keep]
+    run([lt.Hypothesis(e, r) for e in ids for r in angles])
+    h, scale, loss = lt.best(list(scored.values()))
+    return h, scale, loss, len(scored)
+
+
+@dataclass
+class CandidateRenders:
+    """The slot renders of one pair: which render shows each (part, candidate), and its rendered region's mean."""
+
+    renders: list[np.ndarray]  # linear RGB, softened like the photo
+    where: dict[int, dict[int, int]]  # part index -> candidate material -> index into `renders`
+    means: dict[int, dict[int, tuple[np.ndarray, int]]]  # part index -> candidate -> (mean linear RGB, pixels)
+    ids: np.ndarray  # the frame's part indices
+
+
+def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, int | None],
+                      candidates: Mapping[int, Sequence[Candidate]], spec_of: Callable[[int | None], Any],
+                      envmap: Any, erode_pixels: int = 1) -> CandidateRenders:
+    """One render per candidate slot (`render_slots`) under `envmap`.
+
+    `base`: the material of every mesh part that is not switched (part index -> material id, None or
+    absent: built-in); `spec_of` turns a material id into a render spec.
+    """
+    ids = frame.part_ids(scene.mesh, scene.camera)
+    regions = {i: erode(ids == i, erode_pixels) for i in candidates}
+    out = CandidateRenders([], {i: {} for i in candidates}, {i: {} for i in candidates}, ids)
+    for slot in render_slots(candidates):
+        linear = scene.render(frame, [spec_of(slot.get(p.index, base.get(p.index))) for p in scene.mesh.parts],
+                              envmap)
+        out.renders.append(linear)
+        for index, material in slot.items():
+            if material not in out.where[index]:
+                out.where[index][material] = len(out.renders) - 1
+                if regions[index].any():
+                    out.means[index][material] = (linear[regions[index]].mean(axis=0), int(regions[index].sum()))
+    return out
+
+
+def candidate_distances(renders: CandidateRenders, scene: FitScene, exposure: float, weights: Weights,
+                        erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
+    """Part index -> {candidate material: distance to the photo} with the renders at `exposure`."""
+    photo = scene.photo_stats
+    out: dict[int, dict[int, float | None]] = {i: {} for i in renders.where}
+    for k, linear in enumerate(renders.renders):
+        shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
+        if not shown:
+            continue
+        lab = to_lab(lt.exposed_srgb(linear, exposure))
+        for index, value in region_distances(lab, renders.ids, photo, sorted(shown), weights, erode_pixels).items():
+            out[index][shown[index]] = value
+    return out
+
+
+def select_with_exposure(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
+                         exposure: float, weights: Weights, prior_weight: float, rounds: int = 3,
+                         erode_pixels: int = 1) -> tuple[dict[int, dict[int, float | None]], float]:
+    """(distances, exposure): the winners and the exposure solved in turn, without new renders.
+
+    The exposure estimated with the ranking's first materials is biased when they are wrong (a dark
+    wrong material asks for a bright exposure); after each selection the exposure is solved again in
+    closed form with the winners' rendered means, up to `rounds` times or until it settles (1%).
+    """
+    from photoshape_flow.fit.select import rank_candidates
+
+    photo_means = lt.region_means(scene.photo_linear, scene.masks)
+    while True:
+        measured = candidate_distances(renders, scene, exposure, weights, erode_pixels)
+        if rounds <= 0:
+            return measured, exposure
+        rounds -= 1
+        winners = {i: rank_candidates(candidates[i], measured[i], prior_weight)[0].candidate.material_id
+                   for i in candidates if candidates[i]}
+        means = {i: renders.means[i][w] for i, w in winners.items() if w in renders.means[i]}
+        update = lt.exposure(means, photo_means) if means else exposure
+        if abs(math.log(update / exposure)) < 0.01:
+            return measured, exposure
+        exposure = update

@@ -1,0 +1,405 @@
+"""Fit stage: each observed part's material chosen by rendering the pair against its photo.
+
+For every pair ranked by the newest material classifier (`assignment` rows `classifier:<id>`):
+
+1. Lighting of the exemplar (`estimate_lighting`): every training envmap at `rotations` azimuths,
+   each rendered with the classifier's rank-1 materials at the exemplar's reference pair's camera,
+   exposure solved in closed form (`fit.lighting`); the lowest appearance loss wins. Stored in
+   ``exemplar.meta["fit_lighting"]`` with the key of its inputs and reused by every pair of the
+   exemplar until those inputs change.
+2. Candidates per observed part (`fit.candidates`): the ranking's top-K, the colour-nearest material
+   of every substance, every enabled material the classifier was not trained on.
+3. Renders (`fit.select.render_slots`): render j puts each part's j-th candidate on it, at the pair's
+   camera in the exemplar's frame; each part's render region is compared with the photo's aligned
+   region (`fit.appearance.distance`), and the cost adds the ranking prior.
+4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
+   classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
+
+Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
+start from, the candidate set and the lighting key; a pair whose hash is unchanged is skipped, and
+pairs are claimed one at a time (`work_claim`, stage ``fit:<method_key>``) like inference's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.align.partmap import exemplar_at, resize_labels
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db import claims
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.fit.appearance import Weights
+from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
+from photoshape_flow.fit.scene import (
+    FitScene,
+    FrameRenderer,
+    estimate_lighting,
+    render_candidates,
+    select_with_exposure,
+)
+from photoshape_flow.fit.select import rank_candidates, scores_of
+from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
+from photoshape_flow.profiles import FitConfig
+from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import STATUS_OK
+
+log = logging.getLogger(__name__)
+
+METHOD = "fit"
+CODE_VERSION = "fit-1"
+LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
+
+
+@dataclass
+class FitSummary:
+    method_key: str | None
+    pairs_done: int = 0
+    pairs_skipped: int = 0
+    pairs_failed: list[tuple[int, str]] = field(default_factory=list)
+    rows: int = 0
+    lightings: int = 0  # lighting estimates computed (not reused)
+    changed: int = 0  # parts whose first material differs from the classifier's
+
+
+def weights_of(cfg: FitConfig) -> Weights:
+    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight)
+
+
+# -- what one pair is made of ----------------------------------------------------------------------------
+@dataclass
+class PairData:
+    """A pair's scene at the fit resolution and the classifier ranking it starts from."""
+
+    pair: m.Pair
+    scene: FitScene
+    rows: dict[int, list[m.Assignment]]  # part index -> the classifier's rows, best first
+    source_hash: str | None  # params_hash of those rows
+
+    def rank1(self) -> dict[int, int | None]:
+        """Part index -> the classifier's first material."""
+        return {index: rows[0].material_id for index, rows in self.rows.items() if rows}
+
+
+class FitContext:
+    """What one fit run needs once: the classifier, materials, their colours and specs, envmaps, a renderer."""
+
+    def __init__(self, session: Session, store: BlobStore, classifier: m.Classifier, cfg: FitConfig,
+                 renderer: Any = None):
+        from photoshape_flow.pipeline.calibration import material_lab
+
+        self.store = store
+        self.cfg = cfg
+        self.classifier = classifier
+        self.source_key = f"classifier:{classifier.id}"
+        self.method_key = f"{METHOD}:{classifier.id}"
+        mats = session.execute(
+            sa.select(m.Material).where(m.Material.enabled, m.Material.status == STATUS_OK).order_by(m.Material.id)
+        ).scalars().all()
+        self.material_rows = {mat.id: mat for mat in mats}
+        self.material_substance = {mat.id: mat.substance for mat in mats}
+        self.material_labs = {mat.id: lab for mat in mats if (lab := material_lab(mat, store)) is not None}
+        self.untrained = sorted(set(self.material_substance) - {int(x) for x in (classifier.materials or [])})
+        envmaps = session.execute(
+            sa.select(m.Envmap).where(m.Envmap.enabled, m.Envmap.status == STATUS_OK, m.Envmap.blob.is_not(None))
+            .order_by(m.Envmap.id)
+        ).scalars().all()
+        training = [e for e in envmaps if (e.split or "train") == "train"] or list(envmaps)
+        self.envmaps = {e.id: e.blob for e in training}
+        self._renderer = renderer
+        self._frame: FrameRenderer | None = None
+        self._specs: dict[int, Any] = {}
+        self._meshes: dict[int, Any] = {}
+
+    @property
+    def frame(self) -> FrameRenderer:
+        if self._frame is None:
+            if self._renderer is None:
+                from photoshape_flow.render import Renderer
+
+                self._renderer = Renderer(resolve=self.store.resolve)
+            self._frame = FrameRenderer(self._renderer, self.cfg.size, self.cfg.spp)
+        return self._frame
+
+    def spec(self, material_id: int | None) -> Any:
+        """The render spec of a material (None: the part's built-in material)."""
+        if material_id is None or material_id not in self.material_rows:
+            return None
+        if material_id not in self._specs:
+            from photoshape_flow.pipeline.training_renders import material_spec
+
+            self._specs[material_id] = material_spec(self.material_rows[material_id], self.store)
+        return self._specs[material_id]
+
+    def envmap_spec(self, envmap_id: int | None, rotation: float = 0.0) -> Any:
+        """The render spec of a training envmap at a rotation (None: unknown id, the constant white sky)."""
+        from photoshape_flow.render import EnvmapSpec
+
+        blob = self.envmaps.get(envmap_id) if envmap_id is not None else None
+        return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
+
+    def mesh(self, shape: m.Shape) -> Any:
+        from photoshape_flow.geometry.mesh import ShapeMesh
+
+        if shape.id not in self._meshes:
+            if not shape.mesh_blob:
+                raise ValueError(f"shape {shape.id} has no mesh")
+            self._meshes = {shape.id: ShapeMesh.from_npz_bytes(self.store.read_bytes(shape.mesh_blob))}
+        return self._meshes[shape.id]
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key}
+
+    def lighting_key(self, reference_pair: int, reference_hash: str | None) -> str:
+        """What a stored lighting estimate depends on: its pair and ranking, the envmaps, the config."""
+        return stable_hash({**self.params, "pair": reference_pair, "ranking": reference_hash,
+                            "envmaps": sorted(self.envmaps.items())})
+
+
+def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
+    """A pair's photo, aligned regions and classifier rows at the fit resolution; a one-line error when incomplete."""
+    from photoshape_flow.render import Camera
+
+    shape, exemplar = session.get(m.Shape, pair.shape_id), session.get(m.Exemplar, pair.exemplar_id)
+    if shape is None or exemplar is None or not exemplar.image_blob:
+        raise ValueError(f"pair {pair.id}: shape or exemplar image missing")
+    alignment = session.execute(
+        sa.select(m.Alignment).where(m.Alignment.pair_id == pair.id, m.Alignment.method == ALIGNMENT_METHOD,
+                                     m.Alignment.status == STATUS_OK)
+    ).scalar_one_or_none()
+    blob = alignment and (alignment.crf_blob or alignment.flow_blob or alignment.coarse_blob)
+    if not blob:
+        raise ValueError(f"pair {pair.id}: no fine alignment")
+    size = ctx.cfg.size
+    image = ctx.store.load_image(exemplar.image_blob)
+    mask = ctx.store.load_image(exemplar.mask_blob) if exemplar.mask_blob else np.full(image.shape[:2], 255, np.uint8)
+    rgb, foreground = exemplar_at(image, mask, size)
+    labels = ctx.store.load_image(blob)
+    labels = resize_labels(labels[..., 0] if labels.ndim == 3 else labels, size).astype(np.int32)
+    by_part = dict(session.execute(sa.select(m.Part.id, m.Part.index).where(m.Part.shape_id == shape.id)).all())
+    rows: dict[int, list[m.Assignment]] = {}
+    source_hash = None
+    for row in session.execute(
+        sa.select(m.Assignment).where(m.Assignment.pair_id == pair.id, m.Assignment.method_key == ctx.source_key)
+        .order_by(m.Assignment.part_id, m.Assignment.rank)
+    ).scalars():
+        rows.setdefault(by_part[row.part_id], []).append(row)
+        source_hash = row.params_hash
+    observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
+    camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
+                                foreground=foreground)
+    return PairData(pair, scene, rows, source_hash)
+
+
+def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:
+    """Each observed part's candidates (`fit.candidates`); a part with none keeps the ranking (absent here)."""
+    out = {}
+    for index, mask in sorted(data.scene.masks.items()):
+        ranked = [RankedRow(int(r.material_id), r.substance or ctx.material_substance.get(r.material_id, ""), r.score)
+                  for r in data.rows[index] if r.material_id is not None]
+        part_lab = np.median(data.scene.photo_lab[mask].reshape(-1, 3), axis=0)
+        candidates = part_candidates(ranked, ctx.cfg.top_k, ctx.material_substance, ctx.material_labs, part_lab,
+                                     ctx.untrained, ctx.cfg.prior_floor)
+        if candidates:
+            out[index] = candidates
+    return out
+
+
+def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
+    """The best (envmap, rotation, exposure) for the pair's photo (`fit.scene.estimate_lighting`).
+
+    Round 1 lights the ranking's first materials; each further round (`lighting_rounds`) selects the
+    materials under the current estimate and lights those winners again, so a wrong first material
+    does not fix the lighting for good.
+    """
+    # envmap id -> its spec at a rotation; no envmap at all: the constant white sky (id 0)
+    envmaps = {e: partial(ctx.envmap_spec, e) for e in sorted(ctx.envmaps)} or {0: partial(ctx.envmap_spec, 0)}
+    chosen = data.rank1()
+    light: dict[str, Any] = {}
+    for round_ in range(max(1, ctx.cfg.lighting_rounds)):
+        if round_:
+            candidates = candidates_of(ctx, data)
+            measured, _ = select_materials(ctx, data, candidates, light)
+            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.cfg.prior_weight)[0].candidate.material_id
+                                   for i, c in candidates.items() if c}}
+        materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
+        h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
+                                                    weights_of(ctx.cfg), ctx.cfg.lighting_envmaps, ctx.cfg.erode)
+        light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
+                 "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
+    return light
+
+
+def _reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pair | None:
+    """The exemplar's pair whose rank-1 assignment lights it: best shape match with a ranking and an alignment."""
+    return session.execute(
+        sa.select(m.Pair)
+        .join(m.Shape, m.Shape.id == m.Pair.shape_id)
+        .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD,
+                                   m.Alignment.status == STATUS_OK))
+        .where(m.Pair.exemplar_id == exemplar_id, ~m.Pair.exclude, ~m.Shape.exclude,
+               m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == ctx.source_key)))
+        .order_by(sa.func.coalesce(m.Pair.exemplar_rank, 1 << 30), m.Pair.distance, m.Pair.id)
+        .limit(1)
+    ).scalar_one_or_none()
+
+
+def rows_hash(session: Session, pair_id: int, method_key: str) -> str | None:
+    """The params_hash a pair's rows of `method_key` carry (None: no rows)."""
+    return session.execute(
+        sa.select(m.Assignment.params_hash).where(m.Assignment.pair_id == pair_id,
+                                                  m.Assignment.method_key == method_key).limit(1)
+    ).scalar_one_or_none()
+
+
+def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tuple[dict[str, Any], bool]:
+    """The exemplar's stored lighting when its key still holds, else a fresh estimate (stored); (record, computed)."""
+    exemplar = session.get(m.Exemplar, data.pair.exemplar_id)
+    assert exemplar is not None
+    reference = _reference_pair(session, ctx, exemplar.id) or data.pair
+    stored = (exemplar.meta or {}).get(LIGHTING_KEY)
+    for pair in dict.fromkeys((reference, data.pair)):  # the pair itself when its reference cannot be lit
+        key = ctx.lighting_key(pair.id, data.source_hash if pair.id == data.pair.id
+                               else rows_hash(session, pair.id, ctx.source_key))
+        if isinstance(stored, dict) and stored.get("key") == key:
+            return stored, False
+        try:
+            light = lighting_estimate(ctx, data if pair.id == data.pair.id else load_pair(session, ctx, pair))
+        except ValueError as exc:
+            if pair.id == data.pair.id:
+                raise
+            log.warning("fit: exemplar %s: its reference pair %s cannot be lit (%s); lighting pair %s instead",
+                        exemplar.id, pair.id, exc, data.pair.id)
+            continue
+        record = {**light, "pair_id": pair.id, "key": key}
+        exemplar.meta = {**(exemplar.meta or {}), LIGHTING_KEY: record}
+        return record, True
+    raise AssertionError("unreachable: the pair itself is always tried")
+
+
+# -- one pair --------------------------------------------------------------------------------------------
+def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]], lighting_key: str) -> str:
+    """The hash a pair's fit rows carry: config, code, the ranking they start from, the candidates, the lighting."""
+    return stable_hash({**ctx.params, "ranking": data.source_hash, "lighting": lighting_key,
+                        "candidates": {str(i): [c.material_id for c in cs] for i, cs in sorted(candidates.items())}})
+
+
+def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
+                     light: dict[str, Any]) -> tuple[dict[int, dict[int, float | None]], float]:
+    """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`)."""
+    if not candidates:
+        return {}, float(light.get("exposure", 1.0))
+    envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+    renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
+    return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
+                                weights_of(ctx.cfg), ctx.cfg.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
+
+
+def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
+             measured: dict[int, dict[int, float | None]], exposure: float, params_hash: str) -> list[m.Assignment]:
+    """The pair's `fit` rows: observed parts ranked by cost, the others' classifier ranking copied."""
+    out = []
+    for index, rows in sorted(data.rows.items()):
+        base = rows[0]
+        common = {"pair_id": data.pair.id, "part_id": base.part_id, "method": METHOD, "method_key": ctx.method_key,
+                  "classifier_id": ctx.classifier.id, "params_hash": params_hash}
+        if index not in candidates:
+            for row in rows:
+                out.append(m.Assignment(**common, rank=row.rank, material_id=row.material_id, score=row.score,
+                                        substance=row.substance, unobserved=row.unobserved,
+                                        params={**(row.params or {}), "fit": {"source": "ranking-only"}}))
+            continue
+        ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.cfg.prior_weight)
+        for rank, (item, score) in enumerate(zip(ranked, scores_of(ranked), strict=True), start=1):
+            c = item.candidate
+            out.append(m.Assignment(
+                **common, rank=rank, material_id=c.material_id, score=score, substance=c.substance, unobserved=False,
+                params={"uv": IDENTITY_UV, "part_substance": (base.params or {}).get("part_substance"),
+                        "fit": {"source": c.source, "prior": round(c.prior, 6), "cost": round(item.cost, 6),
+                                "distance": None if item.distance is None else round(item.distance, 6),
+                                "exposure": round(exposure, 6)}},
+            ))
+    return out
+
+
+def changed_parts(data: PairData, rows: Sequence[m.Assignment]) -> int:
+    """How many parts' first material the fit rows change from the classifier's (what a run reports)."""
+    first = {ranked[0].part_id: ranked[0].material_id for ranked in data.rows.values() if ranked}
+    return sum(1 for r in rows if r.rank == 1 and r.material_id != first.get(r.part_id))
+
+
+# -- the run ---------------------------------------------------------------------------------------------
+def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | None = None) -> list[int]:
+    """Active, aligned pairs with rows of `source_key`, in id order."""
+    from photoshape_flow.pipeline.progress import active_pairs
+
+    query = active_pairs().where(
+        m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == source_key))
+    ).order_by(m.Pair.id)
+    if pair_ids is not None:
+        query = query.where(m.Pair.id.in_(list(pair_ids)))
+    return list(session.execute(query).scalars())
+
+
+def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: Settings | None = None,
+            renderer: Any = None, classifier_id: int | None = None) -> FitSummary:
+    """Fit every pending pair (see the module docstring); resumable and idempotent, one bad pair never stops it."""
+    settings = settings or get_settings()
+    store = BlobStore(settings.blob_root)
+    url = settings.resolved_database_url
+    with session_scope(url) as session:
+        classifier = resolve_classifier(session, classifier_id)
+        if classifier is None:
+            log.warning("fit: no trained material classifier yet; nothing to fit")
+            return FitSummary(None)
+        ctx = FitContext(session, store, classifier, cfg, renderer)
+        todo = fit_pairs_of(session, ctx.source_key, pair_ids)
+    summary = FitSummary(ctx.method_key)
+    stage = f"{METHOD}:{ctx.method_key}"
+    for pair_id in todo:
+        try:
+            with session_scope(url) as session:
+                pair = session.get(m.Pair, pair_id)
+                assert pair is not None
+                data = load_pair(session, ctx, pair)
+                candidates = candidates_of(ctx, data)
+                # nothing observed: the ranking is copied, no lighting needed
+                light, computed = exemplar_lighting(session, ctx, data) if candidates else ({"key": None}, False)
+                summary.lightings += int(computed)
+                digest = pair_hash(ctx, data, candidates, str(light["key"]))
+                if rows_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
+                        session, stage, [str(pair_id)], params_hash=digest,
+                        lease_seconds=settings.claim_lease_seconds, retry_failed=True):
+                    summary.pairs_skipped += 1
+                    continue
+            with session_scope(url) as session:
+                rows = fit_rows(ctx, data, candidates, *select_materials(ctx, data, candidates, light), digest)
+                session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair_id,
+                                                              m.Assignment.method_key == ctx.method_key))
+                session.add_all(rows)
+                claims.complete(session, stage, [str(pair_id)])
+            summary.pairs_done += 1
+            summary.rows += len(rows)
+            summary.changed += changed_parts(data, rows)
+        except Exception as exc:  # one bad pair never stops the batch
+            reason = f"{type(exc).__name__}: {exc}"
+            log.warning("fit: pair %s failed: %s", pair_id, reason)
+            summary.pairs_failed.append((pair_id, reason))
+            with session_scope(url) as session:
+                claims.fail(session, stage, str(pair_id), reason)
+    log.info("fit %s: %d pairs, %d rows, %d parts changed, %d skipped, %d failed, %d lighting estimates",
+             ctx.method_key, summary.pairs_done, summary.rows, summary.changed, summary.pairs_skipped,
+             len(summary.pairs_failed), summary.lightings)
+    return summary
