@@ -50,7 +50,8 @@ def git_commit() -> str:
     try:
         head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True,
                               check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--", "experiments/second_world"],
+        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--", "experiments/second_world",
+                                ":!experiments/second_world/README.md"],  # the README quotes the build
                                capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
@@ -181,7 +182,8 @@ def build(out: Path, seed: int, count: int, size: int, samples: int, threads: in
              "world": {k: info[k] for k in ("seed", "generator_commit", "counts")},
              "notes": ("parts.material is the ingested library material; on the open-library share it is the "
                        "parent of the variant the photo shows (parts.shown_material, parts.variant). "
-                       "lighting.rotation_blender_z_rad is in Blender's environment-texture convention.")}
+                       "lighting.envmap/rotation/scale light the exemplar as EnvmapSpec(path, scale, rotation) "
+                       "would (project convention, radians about +y); rotation_blender_z is Blender's own.")}
     (out / "groundtruth.json").write_text(json.dumps(truth, indent=1) + "\n")
     licenses.write_licenses(out / "LICENSES", by_key, list(split.collection), kept, list(assets.values()),
                             [h.name for h in hdris], [s.name for s in studios], data / "licenses")

@@ -9,6 +9,7 @@ the build refuses to start without Blender. The Blender round trip runs only whe
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import subprocess
 import zipfile
@@ -98,6 +99,8 @@ def test_scene_and_truth_entries_are_complete(tmp_path):
         assert set(entry["parts"]) == set(p.shape.parts) == set(entry["mask"]["values"].values())
         assert entry["in_collection"] == p.in_collection and entry["open_library"] == p.open_library
         assert set(entry["camera"]) == {"azimuth", "elevation", "distance", "fov"}
+        assert entry["lighting"]["rotation"] == pytest.approx((math.pi / 2 - p.envmap["rotation"]) % (2 * math.pi),
+                                                              abs=1e-5)
         for name, part in entry["parts"].items():
             assert part["material"] in {m.name for m in LIBRARY} and part["substance"] in SUBSTANCES
             assert ("variant" in part) == p.open_library and part["shown_material"] == p.parts[name].shown
