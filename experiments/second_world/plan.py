@@ -139,7 +139,7 @@ def substance_hint(part_name: str) -> str | None:
 
 def _substance(rng: np.random.Generator, part: str) -> str:
     hinted = substance_hint(part)
-    if hinted is not None and rng.random() < 0.85:  # mostly what the model's author meant
+    if hinted is not None:  # what the model's author meant: a plausible photo
         return hinted
     names = list(FALLBACK_WEIGHTS)
     weights = np.array([FALLBACK_WEIGHTS[n] for n in names])
