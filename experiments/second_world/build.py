@@ -47,15 +47,17 @@ def find_blender(given: str | None) -> str | None:
 
 
 def git_commit() -> str:
+    """The last commit that changed the generator (this folder but its README), "+dirty" when the
+    working tree changes it: the world's identity, stable across commits elsewhere in the repo."""
+    paths = ["--", "experiments/second_world", ":!experiments/second_world/README.md"]
     try:
-        head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--", "experiments/second_world",
-                                ":!experiments/second_world/README.md"],  # the README quotes the build
-                               capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(["git", "-C", str(REPO), "log", "-1", "--format=%H", *paths], capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", *paths], capture_output=True,
+                               text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-    return head + ("+dirty" if dirty else "")
+    return (head or "unknown") + ("+dirty" if dirty else "")
 
 
 def run_blender(blender: str, scene_paths: list[Path], threads: int) -> list[str]:
