@@ -2,8 +2,10 @@
 VENV ?= .venv
 SIZE ?= small
 PYTEST_ARGS ?=
+WORLD ?= ../second-world
+WORLD_SEED ?= 0
 
-.PHONY: setup demo test lint bench clean-demo
+.PHONY: setup demo test lint bench clean-demo second-world
 
 setup:
 	@bash scripts/setup.sh
@@ -23,3 +25,8 @@ bench: setup
 	$(VENV)/bin/python bench/retrieval.py
 	$(VENV)/bin/python bench/classifier.py
 	$(VENV)/bin/python bench/ingest.py
+
+# The second evaluation world (issue 24): real catalogue shapes and scans rendered by Blender Cycles,
+# outside git and outside the test suite; needs `apt-get install -y blender`.
+second-world: setup
+	$(VENV)/bin/python -m experiments.second_world.build --out $(WORLD) --seed $(WORLD_SEED)
