@@ -38,6 +38,7 @@ def test_serve_registers_the_deployments_and_debounces_material_events(
 
     env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(tmp_path / "data"), "DO_NOT_TRACK": "1"}
     photoshape = str(Path(sys.executable).with_name("photoshape"))
+    started = time.time()  # the server is shared: another test's runs of new-materials are not this one's
     serve = subprocess.Popen([photoshape, "serve"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     declared = sorted(d["name"] for d in load_declarations())
     try:
@@ -62,8 +63,8 @@ def test_serve_registers_the_deployments_and_debounces_material_events(
         async def new_material_runs(client):  # type: ignore[no-untyped-def]
             deployment = (await client.read_deployments(
                 deployment_filter=DeploymentFilter(name=DeploymentFilterName(any_=["new-materials"]))))[0]
-            return await client.read_flow_runs(
-                deployment_filter=DeploymentFilter(id={"any_": [deployment.id]}))
+            runs = await client.read_flow_runs(deployment_filter=DeploymentFilter(id={"any_": [deployment.id]}))
+            return [r for r in runs if r.created is not None and r.created.timestamp() >= started]
 
         runs = []
         deadline = time.time() + 60

@@ -26,15 +26,16 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
 
     Returns (pair, part) -> true material, and the material the planted classifier was not trained on.
     """
-    from photoshape_flow.demo import load_groundtruth
-    from photoshape_flow.pipeline import evaluate as ev
-    from photoshape_flow.pipeline.ingest import ingest_envmaps, ingest_exemplars, ingest_materials, ingest_shapes
+    from tests.conftest import ingest_tiny_demo
 
-    ingest_exemplars([tiny_demo / "exemplars"], source="demo-tiny", size=64)
-    ingest_shapes([tiny_demo / "shapes"], isolate=False)
-    ingest_materials([tiny_demo / "materials"], previews=False)
+    from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
+    from photoshape_flow.pipeline import evaluate as ev
+    from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+    from photoshape_flow.pipeline.ingest import ingest_envmaps
+
+    ingest_tiny_demo(tiny_demo, exemplar_size=64)  # under the demo's source, as its ground truth names them
     ingest_envmaps(sorted((tiny_demo / "envmaps").glob("studio*")), isolate=False)
-    gt = load_groundtruth(tiny_demo / "groundtruth.json")
+    gt = read_groundtruth_file(tiny_demo / "groundtruth.json")
     truth_of: dict[tuple[int, int], int] = {}
     with session_scope(db_url) as session:
         shapes = {s.source_id: s for s in session.execute(sa.select(m.Shape)).scalars()}
@@ -45,7 +46,9 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
         session.flush()
         untrained_id = list(materials.values())[-1].id
         blind: m.Pair | None = None
-        for exemplar_id, truth in ev._exemplar_truths(session, gt, "demo-tiny").items():
+        matched = match_groundtruth(session, gt, "demo-tiny")
+        assert matched.truths, matched.problems
+        for exemplar_id, truth in matched.truths.items():
             if not truth.in_collection:
                 continue
             shape, camera = shapes[truth.shape], truth.camera
