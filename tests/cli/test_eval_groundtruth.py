@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -137,6 +138,7 @@ def test_eval_groundtruth_scores_the_good_entries_and_names_each_bad_one(
                                       "is not ingested (say \"in_collection\": false", "ex_0999 is not ingested",
                                       "source_id must be a non-empty string"), strict=True):
         assert any(name in line and reason in line for line in lines), (name, lines)
+    assert re.search(r"^eval pairs x methods: \d+/\d+ \(100%\)", result.output, re.M), result.output  # progress
     out = flat(result.output)
     assert out.index("headline:ours") < out.index("ours(classifier1)") < out.index("color-match")
     assert out.index("color-match") < out.index("everyfigure")

@@ -71,8 +71,9 @@ def demo(
     if evaluate:
         from photoshape_flow.pipeline.evaluate import run_evaluation
 
-        run_name, metrics = run_evaluation(manifest.groundtruth, f"{source}-{time.strftime('%Y%m%d-%H%M%S')}",
-                                           exemplar_source=source, on_problem=print_problem)
+        with cli_progress(console) as progress:
+            run_name, metrics = run_evaluation(manifest.groundtruth, f"{source}-{time.strftime('%Y%m%d-%H%M%S')}",
+                                               exemplar_source=source, on_problem=print_problem, progress=progress)
         print_metrics(metrics)
         console.print(f"evaluation stored as run [bold]{run_name}[/] (table `evaluation`)")
     elapsed = time.perf_counter() - started

@@ -75,9 +75,12 @@ def eval_command(
     bad = [s for s in stage or [] if s not in EVAL_STAGES]
     if bad:
         fail(f"cannot evaluate {', '.join(bad)}; choose from {', '.join(EVAL_STAGES)}")
+    from photoshape_flow.cli.progress import cli_progress
+
     try:
-        name, metrics = run_evaluation(chosen, run, stages=stage or EVAL_STAGES, exemplar_source=source,
-                                       on_problem=print_problem)
+        with cli_progress(console) as progress:
+            name, metrics = run_evaluation(chosen, run, stages=stage or EVAL_STAGES, exemplar_source=source,
+                                           on_problem=print_problem, progress=progress)
     except ValueError as exc:
         fail(str(exc))
     print_metrics(metrics)

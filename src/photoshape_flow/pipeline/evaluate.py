@@ -45,6 +45,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -250,7 +251,7 @@ def rerender_error(render: np.ndarray, exemplar: np.ndarray, mask: np.ndarray) -
 
 def evaluate_inference(
     session: Session, store: BlobStore, truths: dict[int, TruthEntry], *, rerender_size: int = 128,
-    rerender_spp: int = 16, rerender_max_pairs: int | None = 200,
+    rerender_spp: int = 16, rerender_max_pairs: int | None = 200, progress: Progress | None = None,
 ) -> list[Metric]:
     """Material top-1/top-5 and substance accuracy per part, re-render RMSE/SSIM per pair, per method."""
     rows = session.execute(
@@ -271,7 +272,7 @@ def evaluate_inference(
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
     rerender_pairs: dict[str, int] = defaultdict(int)
     rerenderer: _Rerenderer | None = None
-    for (pair_id, method_key), parts in ranked.items():
+    for (pair_id, method_key), parts in counted(progress, "eval pairs x methods", list(ranked.items())):
         pair = session.get(m.Pair, pair_id)
         exemplar = session.get(m.Exemplar, pair.exemplar_id)
         alignment = session.execute(
@@ -344,6 +345,7 @@ def run_evaluation(
     rerender_spp: int = 16,
     rerender_max_pairs: int | None = 200,
     on_problem: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
 ) -> tuple[str, list[Metric]]:
     """Evaluate what the database holds against a ground-truth file; stores and returns the metrics.
 
@@ -382,7 +384,8 @@ def run_evaluation(
             metrics += evaluate_training(session)
         if "inference" in stages:
             metrics += evaluate_inference(session, store, truths, rerender_size=rerender_size,
-                                          rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs)
+                                          rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs,
+                                          progress=progress)
     with session_scope(settings.resolved_database_url) as session:
         params = {"groundtruth": str(groundtruth), "exemplars": len(truths), "skipped": len(matched.problems)}
         for metric in metrics:
