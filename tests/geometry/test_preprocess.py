@@ -111,6 +111,24 @@ def test_degenerate_source_uvs_are_regenerated() -> None:
     assert "regenerated" in " ".join(mesh.meta["warnings"])
 
 
+def test_a_failed_unwrap_falls_back_to_box_uvs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """xatlas returned NaN charts for a Sweet Home 3D part (BlendSwap-CC-0, a flower box): the part
+    gets box-projected UVs with a warning instead of NaN areas that the database refuses."""
+    import photoshape_flow.geometry.preprocess as pre
+
+    real = pre._xatlas_unwrap
+
+    def nan_charts(v, f, options):  # type: ignore[no-untyped-def]
+        pos_id, verts, uvs, faces = real(v, f, options)
+        return pos_id, verts, np.full_like(uvs, np.nan), faces
+
+    monkeypatch.setattr(pre, "_xatlas_unwrap", nan_charts)
+    vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+    part = preprocess(_raw(vertices, [[0, 1, 2], [0, 2, 3]], None)).parts[0]
+    assert part.meta["uv_source"] == "box" and np.isfinite(part.uvs).all()
+    assert part.area_uv > 0 and np.isfinite(part.uv_density)
+
+
 def test_uv_seams_survive_welding() -> None:
     # two triangles share an edge in space but not in UV space (a seam): both UV sets must stay
     vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]

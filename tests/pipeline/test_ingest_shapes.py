@@ -257,3 +257,31 @@ def test_reingest_renames_rows_stored_under_the_former_stem_id(db_url: str, tmp_
                         .values(source_id="chair", source_path="/gone/chair.obj"))
     summary = ingest_shapes([tmp_path / "shapes"], isolate=False)
     assert set(_shapes(db_url)) == {"a/chair", "b/chair"} and before.id in summary.present and not summary.added
+
+
+def test_a_shape_the_database_refuses_fails_alone(db_url: str, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A row the database refuses (a NaN area became NULL in a NOT NULL column) fails that shape with one
+    line; the shapes after it are ingested and nothing of it is half-written."""
+    import photoshape_flow.pipeline.ingest_shapes as ingest_module
+
+    real = ingest_module._part_rows
+    calls: list[int] = []
+
+    def refused(shape_id, prepared):  # type: ignore[no-untyped-def]
+        rows = real(shape_id, prepared)
+        if not calls:  # the first shape stored: a.obj (files are taken in name order)
+            rows[0]["area_uv"] = float("nan")
+        calls.append(shape_id)
+        return rows
+
+    monkeypatch.setattr(ingest_module, "_part_rows", refused)
+    write_chair_obj(tmp_path / "in", "a")
+    write_chair_obj(tmp_path / "in", "b")
+    summary = ingest_shapes([tmp_path / "in"], isolate=False)
+    shapes = _shapes(db_url)
+    assert shapes["a"].status == "failed" and "could not store it" in shapes["a"].error
+    assert shapes["b"].status == "ok" and len(summary.added) == 1
+    with session_scope(db_url) as session:
+        assert session.execute(sa.select(sa.func.count()).select_from(m.Part)
+                               .where(m.Part.shape_id == shapes["a"].id)).scalar_one() == 0

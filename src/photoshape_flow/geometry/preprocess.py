@@ -148,7 +148,9 @@ def _finish_part(
     elif len(f) <= options.xatlas_max_faces:
         pos_id, verts, uvs, faces = _xatlas_unwrap(v, f, options)
         uv_source = "xatlas"
-    else:
+    if corner_uv is None and (len(f) > options.xatlas_max_faces or not np.isfinite(uvs).all()):
+        if len(f) <= options.xatlas_max_faces:  # xatlas gave NaN charts (seen on degenerate catalogue parts)
+            warnings.append(f"part {clean.raw.name!r}: the UV unwrap failed; box-projected instead")
         pos_id, verts, uvs, faces = _weld_corners(v, f, _box_uvs(v, f))
         uv_source = "box"
     normals = corner_normals(verts, faces, pos_id, options.crease_angle_deg)

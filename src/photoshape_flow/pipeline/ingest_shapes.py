@@ -205,11 +205,17 @@ def _ingest_item(
         "status": STATUS_OK,
         "error": None,
     }
-    with session_scope(url) as session:
-        shape_id = upsert(session, m.Shape, values, key=["source", "source_id"])[0]
-        if existing is not None:
-            delete_shape_dependents(session, shape_id)
-        session.execute(sa.insert(m.Part), _part_rows(shape_id, prepared))
+    try:
+        with session_scope(url) as session:  # one transaction: the shape and its parts, or neither
+            shape_id = upsert(session, m.Shape, values, key=["source", "source_id"])[0]
+            if existing is not None:
+                delete_shape_dependents(session, shape_id)
+            session.execute(sa.insert(m.Part), _part_rows(shape_id, prepared))
+    except Exception as exc:  # a row the database refuses (a bug upstream): this shape fails, the batch goes on
+        logger.exception("%s: could not store the shape", label)
+        _record_failure(url, summary, label, row, STATUS_FAILED,
+                        f"could not store it: {type(exc).__name__}: {one_line(exc).splitlines()[0][:300]}", existing)
+        return
     summary.count_written(label, shape_id, existing, "shape")
 
 
