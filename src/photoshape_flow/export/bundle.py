@@ -40,6 +40,7 @@ from photoshape_flow.export.formats import (
     parse_formats,
 )
 from photoshape_flow.export.pbr import ResolveRef
+from photoshape_flow.faults import fault_point
 
 # a relative file name with an extension the formats refer to (a number such as "0.5" is none)
 FILE_REFERENCE = re.compile(r"[\w./-]+\.(?:bin|mtl|png|jpe?g|exr|ply|hdr|tga|tiff?)\b", re.IGNORECASE)
@@ -79,6 +80,7 @@ def export_photoshape(
             exporter = EXPORTERS[fmt]
             exporter.write(stage / exporter.path, item)
             written[fmt] = out / exporter.path
+            fault_point("export-writing")
         (stage / SIDECAR_PATH).write_text(json.dumps(document, indent=2, sort_keys=True, default=str))
         (stage / "ATTRIBUTION.txt").write_text("\n".join(item.attribution) + "\n")
         written[SIDECAR] = out / SIDECAR_PATH

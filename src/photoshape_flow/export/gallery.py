@@ -29,6 +29,7 @@ from typing import Any
 
 from photoshape_flow.export.formats import EXPORTERS, SIDECAR, SIDECAR_PATH
 from photoshape_flow.export.templating import render
+from photoshape_flow.faults import fault_point
 
 INDEX_PAGE, CANDIDATES_PAGE = "index.html", "candidates.html"
 
@@ -217,6 +218,7 @@ def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets) -> None:
     page = render("gallery_pair.html", title=f"PhotoShape {entry.pair_id}: {entry.shape_name}", root="../",
                   e=entry, figures=figures, downloads=downloads)
     (root / "pairs" / f"{entry.slug}.html").write_text(page, encoding="utf-8")
+    fault_point("gallery-writing")
 
 
 def _write_materials_page(

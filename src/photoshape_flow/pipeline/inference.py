@@ -42,6 +42,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.pipeline.calibration import (
     material_lab,
@@ -411,6 +412,7 @@ def run_inference(
                     summary.rows += infer_pair(session, ctx, pair, method_key, expected[pair_id])
                     claims.complete(session, stage, [key])
                 summary.pairs_done += 1
+                fault_point("inference-pair-done")
             except Exception as exc:  # one bad pair never stops the batch
                 reason = f"{type(exc).__name__}: {exc}"
                 log.warning("pair %s: %s inference failed: %s", pair_id, method_key, reason)

@@ -30,6 +30,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.faults import fault_point
 from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError, WorkerTimeoutError
 from photoshape_flow.geometry.prepare import TEXTURE_PLACEHOLDER, PreparedShape, prepare_shape
 from photoshape_flow.geometry.preprocess import PreprocessOptions
@@ -192,6 +193,7 @@ def _ingest_item(
     for warning in prepared.warnings:
         summary.warn(label, warning)
     mesh_ref = _store_prepared(store, prepared)
+    fault_point("ingest-blob-before-row")
     mesh = prepared.mesh
     meta = {**mesh.meta, **item.meta, "split_source": "user" if split else "hash"}
     values = {

@@ -24,6 +24,7 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db.models import Rendering
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.faults import fault_point
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -99,6 +100,8 @@ def record_rendering(
             blobs[name] = store_image(store, image)
         except ValueError as exc:
             raise ValueError(f"rendering {kind}/{key}, pass {name!r}: {exc}") from exc
+    if blobs:
+        fault_point("rendering-blobs-before-row")
     row = {
         "kind": kind,
         "key": key,

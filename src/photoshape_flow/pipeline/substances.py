@@ -39,6 +39,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
+from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.progress_sink import Progress, counted, no_progress
@@ -167,6 +168,7 @@ def train_or_resume(
                     status=STATUS_OK if ckpt["epoch"] >= config.epochs else STATUS_TRAINING,
                 )
             )
+        fault_point("substance-checkpoint-saved")
 
     try:
         result = train_substance_net(train, val if len(val) else None, config, checkpoint=checkpoint, on_epoch=save)

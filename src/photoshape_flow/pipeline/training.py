@@ -41,6 +41,7 @@ from photoshape_flow.db.models import Classifier, Evaluation, Material, Renderin
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
+from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, no_progress
@@ -336,6 +337,7 @@ def run_training(
                 )
             _drop_superseded(store, current["ref"], ref)
             current["ref"] = ref
+            fault_point("training-checkpoint-saved")
             report("training epochs", int(checkpoint["epoch"]), epochs)
 
         started = time.perf_counter()

@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db import claims
 from photoshape_flow.db.heartbeat import Heartbeat
+from photoshape_flow.faults import fault_point
 from photoshape_flow.pipeline.progress import StageProgress
 from photoshape_flow.profiles import Profile, ResolvedProfile, resolve_profile
 from photoshape_flow.stages.context import StageContext
@@ -227,6 +228,7 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
     mine = tuple(int(k) for k in won)
     if not mine:
         return StageReport(name, skipped=len(unit.ids) - blocked.count, blocked=blocked)
+    fault_point("claimed-before-result")
     try:
         with Heartbeat(ctx.database_url, lease):
             report = _timed(lambda: stage.run(ctx, cfg, WorkUnit(unit.part, mine)))
