@@ -84,8 +84,8 @@ def snapshot(url: str) -> dict[str, Any]:
         "envmap": "SELECT name, split, blob FROM envmap",
         "view_feature": "SELECT s.source_id, v.descriptor, v.feature_blob FROM view_feature v "
                         "JOIN shape s ON s.id = v.shape_id",
-        "pair": "SELECT s.source_id, e.source_id, p.rank, p.view_index, ROUND(CAST(p.distance AS NUMERIC), 4) FROM pair p "
-                "JOIN shape s ON s.id = p.shape_id JOIN exemplar e ON e.id = p.exemplar_id",
+        "pair": "SELECT s.source_id, e.source_id, p.rank, p.view_index, ROUND(CAST(p.distance AS NUMERIC), 4) "
+                "FROM pair p JOIN shape s ON s.id = p.shape_id JOIN exemplar e ON e.id = p.exemplar_id",
         "alignment": "SELECT s.source_id, e.source_id, a.status, a.crf_blob FROM alignment a "
                      "JOIN pair p ON p.id = a.pair_id JOIN shape s ON s.id = p.shape_id "
                      "JOIN exemplar e ON e.id = p.exemplar_id",
