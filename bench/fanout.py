@@ -7,6 +7,7 @@ work table by the worker processes). Reports the flow's wall time per worker cou
 every run wrote the same rendering rows (keys and params hashes). Writes bench/results/fanout.json.
 
 Usage: .venv/bin/python bench/fanout.py [--stage training-renders] [--count 64] [--workers 1 2]
+       [--set training_renders.size=128 --set training_renders.spp=32]
 Measure on an otherwise idle machine (2 cores: one heavy job at a time).
 """
 
@@ -73,6 +74,8 @@ def main() -> None:
     parser.add_argument("--stage", choices=("training-renders", "substances"), default="training-renders")
     parser.add_argument("--count", type=int, default=64, help="renders to make")
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        help="more profile overrides, e.g. training_renders.size=128")
     args = parser.parse_args()
     field, kind = (("training_renders.count", "training") if args.stage == "training-renders"
                    else ("substances.bootstrap_count", "bootstrap"))
@@ -89,7 +92,8 @@ def main() -> None:
             env = {**os.environ, "PHOTOSHAPE_DATA_ROOT": str(root), "PHOTOSHAPE_DASK_WORKERS": str(workers),
                    "PREFECT_API_URL": "", "DO_NOT_TRACK": "1", "OMP_NUM_THREADS": "1"}
             env.pop("PHOTOSHAPE_DATABASE_URL", None)
-            out = subprocess.run([sys.executable, "-c", FLOW, args.stage, f"{field}={args.count}"], env=env,
+            out = subprocess.run([sys.executable, "-c", FLOW, args.stage, f"{field}={args.count}", *args.overrides],
+                                 env=env,
                                  capture_output=True, text=True, cwd=REPO)
             if out.returncode != 0:
                 raise SystemExit(f"{workers} workers: flow failed\n{out.stderr[-3000:]}")
@@ -105,7 +109,8 @@ def main() -> None:
         for r in results:
             r["speedup"] = round(first / r["seconds"], 2)
             del r["rows_hash"]
-        record = {"stage": args.stage, "count": args.count, "same_rows": same, "results": results,
+        record = {"stage": args.stage, "count": args.count, "overrides": args.overrides, "same_rows": same,
+                  "results": results,
                   "machine": f"{platform.node()} {platform.processor() or platform.machine()}, {os.cpu_count()} cores",
                   "date": time.strftime("%Y-%m-%d %H:%M"), "load": os.getloadavg()[0]}
         print(json.dumps(record, indent=2))
