@@ -285,3 +285,24 @@ def test_a_shape_the_database_refuses_fails_alone(db_url: str, tmp_path: Path,
     with session_scope(db_url) as session:
         assert session.execute(sa.select(sa.func.count()).select_from(m.Part)
                                .where(m.Part.shape_id == shapes["a"].id)).scalar_one() == 0
+
+
+def test_a_catalog_texture_with_an_authoring_machine_path_is_found_next_to_the_model(
+        db_url: str, store, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """9 of 826 Sweet Home 3D models were refused for an MTL line like `map_Kd C:/Documents and
+    Settings/.../wood.jpg`: the path is never followed, the file of that name beside the model is used."""
+    import cv2
+
+    members = chair_members("t/chair")
+    mtl = members["t/chair/chair.mtl"].decode()
+    members["t/chair/chair.mtl"] = mtl.replace("newmtl seat", "newmtl seat\nmap_Kd C:/Users/me/Desktop/wood.jpg", 1)\
+        .encode()
+    members["t/chair/wood.jpg"] = cv2.imencode(".jpg", np.full((8, 8, 3), 90, np.uint8))[1].tobytes()
+    write_sh3f(tmp_path / "cat" / "Test.sh3f", [SH3D_CHAIR], members)
+    summary = ingest_shapes([tmp_path / "cat"], isolate=False)
+    assert len(summary.added) == 1 and not summary.rejected, summary.rejected
+    shape = _shapes(db_url)["Test/T#chair"]
+    with session_scope(db_url) as session:
+        seat = session.execute(sa.select(m.Part).where(m.Part.shape_id == shape.id, m.Part.name == "seat")
+                               ).scalar_one()
+        assert store.exists(seat.builtin_material["texture"])  # the texture beside the model

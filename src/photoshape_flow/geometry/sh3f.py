@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.geometry.archive import SafeZip, join_member, normalise_member
+from photoshape_flow.geometry.archive import SafeZip, UnsafeArchiveError, join_member, normalise_member
 from photoshape_flow.geometry.mtl import mtl_references
 from photoshape_flow.geometry.obj import obj_references
 from photoshape_flow.geometry.raw import BadShapeError
@@ -190,9 +190,14 @@ def model_files(archive: SafeZip, model: str) -> list[str]:
         files.append(mtl)
         mtl_text = archive.read(mtl).decode("utf-8", errors="replace")
         for tex in mtl_references(mtl_text):
-            member = join_member(posixpath.dirname(mtl), tex)
-            if archive.find(member) is not None:
+            try:
+                member: str | None = join_member(posixpath.dirname(mtl), tex)
+            except UnsafeArchiveError:  # an absolute path from the author's machine: never followed, but the
+                member = None           # file of that name next to the model is used, as the OBJ loader does
+            if member is not None and archive.find(member) is not None:
                 files.append(member)
-            elif archive.find(join_member(base, posixpath.basename(tex))) is not None:
-                files.append(join_member(base, posixpath.basename(tex)))
+            else:
+                nearby = join_member(base, posixpath.basename(tex.replace("\\", "/")))
+                if archive.find(nearby) is not None:
+                    files.append(nearby)
     return list(dict.fromkeys(files))
