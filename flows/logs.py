@@ -16,14 +16,26 @@ import logging
 PROJECT_LOGGER = "photoshape_flow"
 
 
+def _in_a_run(record: logging.LogRecord) -> bool:
+    """Only records made inside a flow or task run go to the API (the same process may also run CLI code,
+    e.g. a test or a notebook, where Prefect's handler would warn about a missing flow run id)."""
+    from prefect.context import FlowRunContext, TaskRunContext
+
+    return FlowRunContext.get() is not None or TaskRunContext.get() is not None
+
+
 def forward_project_logs(level: int = logging.INFO) -> logging.Logger:
     """Attach Prefect's API log handler to the project's logger (idempotent); INFO and up by default."""
     from prefect.logging.handlers import APILogHandler
 
     logger = logging.getLogger(PROJECT_LOGGER)
     if not any(isinstance(h, APILogHandler) for h in logger.handlers):
-        configured = [h for h in logging.getLogger("prefect.extra").handlers if isinstance(h, APILogHandler)]
-        logger.addHandler(configured[0] if configured else APILogHandler())
+        from photoshape_flow.masking import PasswordMaskFilter
+
+        handler = APILogHandler()
+        handler.addFilter(_in_a_run)
+        handler.addFilter(PasswordMaskFilter())
+        logger.addHandler(handler)
     if logger.level == logging.NOTSET or logger.level > level:
         logger.setLevel(level)
     return logger
