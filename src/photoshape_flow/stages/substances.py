@@ -22,12 +22,9 @@ def plan(ctx: StageContext, cfg: SubstancesConfig) -> list[WorkUnit]:
 
 
 def versions(ctx: StageContext, cfg: SubstancesConfig, unit: WorkUnit) -> dict[int, str]:
-    """Every item of the unit carries the digest of the pools its spec is drawn from."""
-    from photoshape_flow.pipeline.training_renders import pools_digest
+    from photoshape_flow.stages.training_renders import pool_versions
 
-    with ctx.session() as session:
-        digest = pools_digest(session, "bootstrap")
-    return dict.fromkeys(unit.ids, digest)
+    return pool_versions(ctx, "bootstrap", unit)
 
 
 def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) -> StageReport:

@@ -19,13 +19,18 @@ def plan(ctx: StageContext, cfg: TrainingRendersConfig) -> list[WorkUnit]:
     return [WorkUnit("training", tuple(range(cfg.count)))]
 
 
-def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> dict[int, str]:
-    """Every item of the unit carries the digest of the pools its spec is drawn from."""
+def pool_versions(ctx: StageContext, round_: str, unit: WorkUnit) -> dict[int, str]:
+    """Every item of a render unit (`round_`: training or bootstrap) carries the digest of the pools
+    its spec is drawn from; the substances stage shares it for its bootstrap renders."""
     from photoshape_flow.pipeline.training_renders import pools_digest
 
     with ctx.session() as session:
-        digest = pools_digest(session, "training")
+        digest = pools_digest(session, round_)  # type: ignore[arg-type]
     return dict.fromkeys(unit.ids, digest)
+
+
+def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> dict[int, str]:
+    return pool_versions(ctx, "training", unit)
 
 
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
