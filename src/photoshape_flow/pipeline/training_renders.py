@@ -452,26 +452,3 @@ def run_training_renders(
     )
     return summary
 
-
-def pools_digest(session: sa.orm.Session, round: Round, val_fraction: float = VAL_FRACTION) -> str:
-    """A key of everything an item's spec and pixels are drawn from (pools, material, envmap and mesh blobs).
-
-    Work claims of the render stages are versioned by it: when materials, envmaps, shapes or part
-    substances change, done items are re-opened and the render stage's own per-item hash decides
-    what to redo (items whose spec did not change are skipped).
-    """
-    from dataclasses import asdict
-
-    from photoshape_flow.hashing import stable_hash
-
-    try:
-        pools = asdict(load_pools(session, round, val_fraction))
-    except ValueError as exc:  # nothing to render: the run reports it
-        return stable_hash({"error": str(exc)})
-    pools.pop("warnings", None)
-    blobs = {
-        "materials": session.execute(sa.select(m.Material.id, m.Material.params_hash).order_by(m.Material.id)).all(),
-        "envmaps": session.execute(sa.select(m.Envmap.id, m.Envmap.blob).order_by(m.Envmap.id)).all(),
-        "shapes": session.execute(sa.select(m.Shape.id, m.Shape.mesh_blob).order_by(m.Shape.id)).all(),
-    }
-    return stable_hash({"pools": pools, "blobs": {k: [list(r) for r in v] for k, v in blobs.items()}})

@@ -7,6 +7,8 @@ paper-scale run (156k renders) without rendering an item twice.
 
 from __future__ import annotations
 
+from typing import Any
+
 from photoshape_flow.profiles import TrainingRendersConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -19,13 +21,39 @@ def plan(ctx: StageContext, cfg: TrainingRendersConfig) -> list[WorkUnit]:
     return [WorkUnit("training", tuple(range(cfg.count)))]
 
 
+def pools_digest(session: Any, round: str) -> str:
+    """A key of everything an item's spec and pixels are drawn from (pools, material, envmap and mesh blobs).
+
+    Work claims of the render stages are versioned by it: when materials, envmaps, shapes or part
+    substances change, done items are re-opened and the render stage's own per-item hash decides
+    what to redo (items whose spec did not change are skipped).
+    """
+    from dataclasses import asdict
+
+    import sqlalchemy as sa
+
+    from photoshape_flow.db import models as m
+    from photoshape_flow.hashing import stable_hash
+    from photoshape_flow.pipeline.training_renders import load_pools
+
+    try:
+        pools = asdict(load_pools(session, round))  # type: ignore[arg-type]
+    except ValueError as exc:  # nothing to render: the run reports it
+        return stable_hash({"error": str(exc)})
+    pools.pop("warnings", None)
+    blobs = {
+        "materials": session.execute(sa.select(m.Material.id, m.Material.params_hash).order_by(m.Material.id)).all(),
+        "envmaps": session.execute(sa.select(m.Envmap.id, m.Envmap.blob).order_by(m.Envmap.id)).all(),
+        "shapes": session.execute(sa.select(m.Shape.id, m.Shape.mesh_blob).order_by(m.Shape.id)).all(),
+    }
+    return stable_hash({"pools": pools, "blobs": {k: [list(r) for r in v] for k, v in blobs.items()}})
+
+
 def pool_versions(ctx: StageContext, round_: str, unit: WorkUnit) -> dict[int, str]:
     """Every item of a render unit (`round_`: training or bootstrap) carries the digest of the pools
     its spec is drawn from; the substances stage shares it for its bootstrap renders."""
-    from photoshape_flow.pipeline.training_renders import pools_digest
-
     with ctx.session() as session:
-        digest = pools_digest(session, round_)  # type: ignore[arg-type]
+        digest = pools_digest(session, round_)
     return dict.fromkeys(unit.ids, digest)
 
 
