@@ -59,3 +59,20 @@ def make_aligned_pairs(url: str, store: BlobStore, n_pairs: int = 1) -> dict[str
             pair_ids.append(pair.id)
         return {"pairs": pair_ids, "seat": parts[0].id, "legs": parts[1].id, "hidden": parts[2].id,
                 **{mat.name: mat.id for mat in mats}}
+
+
+def plant_true_pair(session, store: BlobStore, shape: m.Shape, exemplar_id: int, truth) -> m.Pair:  # type: ignore[no-untyped-def]
+    """A pair of `shape` and an exemplar at the ground truth's camera, with the true part map as its
+    CRF alignment: what perfect coarse and fine alignment would have written."""
+    from photoshape_flow.pipeline.evaluate import truth_labels
+
+    camera = truth.camera
+    pair = m.Pair(shape_id=shape.id, exemplar_id=exemplar_id, rank=1, exemplar_rank=1, distance=0.0,
+                  azimuth=camera.azimuth, elevation=camera.elevation, fov=camera.fov, camera_distance=camera.distance)
+    session.add(pair)
+    session.flush()
+    labels, _, _ = truth_labels(truth, session.get(m.Exemplar, exemplar_id))
+    index = {p.name: p.index for p in shape.parts}
+    to_shape = np.array([0] + [index[name] for name in sorted(truth.parts)], np.uint8)
+    session.add(m.Alignment(pair_id=pair.id, method="flow-crf", crf_blob=store.put_image(to_shape[labels])))
+    return pair

@@ -23,6 +23,7 @@ import pytest
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 from tests.conftest import ingest_tiny_demo
+from tests.pipeline.aligned import plant_true_pair
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -781,16 +782,8 @@ def test_rerender_error_with_mitsuba_prefers_the_true_materials(tiny_demo: Path,
         for exemplar_id, truth in truths.items():
             if not truth.in_collection:
                 continue
-            shape, camera = shapes[truth.shape], truth.camera
-            pair = m.Pair(shape_id=shape.id, exemplar_id=exemplar_id, rank=1, exemplar_rank=1, distance=0.0,
-                          azimuth=camera.azimuth, elevation=camera.elevation, fov=camera.fov,
-                          camera_distance=camera.distance)
-            session.add(pair)
-            session.flush()
-            labels, _, _ = ev.truth_labels(truth, session.get(m.Exemplar, exemplar_id))
-            index = {p.name: p.index for p in shape.parts}
-            to_shape = np.array([0] + [index[name] for name in sorted(truth.parts)], np.uint8)
-            session.add(m.Alignment(pair_id=pair.id, method="flow-crf", crf_blob=store.put_image(to_shape[labels])))
+            shape = shapes[truth.shape]
+            pair = plant_true_pair(session, store, shape, exemplar_id, truth)
             for part in shape.parts:
                 true = truth.parts[part.name]
                 other = min(n for n, x in materials.items() if x.substance != true.substance)

@@ -27,9 +27,9 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
     Returns (pair, part) -> true material, and the material the planted classifier was not trained on.
     """
     from tests.conftest import ingest_tiny_demo
+    from tests.pipeline.aligned import plant_true_pair
 
     from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-    from photoshape_flow.pipeline import evaluate as ev
     from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
     from photoshape_flow.pipeline.ingest import ingest_envmaps
 
@@ -52,15 +52,9 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
             if not truth.in_collection:
                 continue
             shape, camera = shapes[truth.shape], truth.camera
-            pair = m.Pair(shape_id=shape.id, exemplar_id=exemplar_id, rank=1, exemplar_rank=1, distance=0.0,
-                          azimuth=camera.azimuth, elevation=camera.elevation, fov=camera.fov,
-                          camera_distance=camera.distance)
-            session.add(pair)
-            session.flush()
-            labels, _, _ = ev.truth_labels(truth, session.get(m.Exemplar, exemplar_id))
-            index = {p.name: p.index for p in shape.parts}
-            to_shape = np.array([0] + [index[name] for name in sorted(truth.parts)], np.uint8)
-            session.add(m.Alignment(pair_id=pair.id, method="flow-crf", crf_blob=store.put_image(to_shape[labels])))
+            pair = plant_true_pair(session, store, shape, exemplar_id, truth)
+            true_map = store.load_image(session.execute(sa.select(m.Alignment.crf_blob).where(
+                m.Alignment.pair_id == pair.id)).scalar_one())
             for part in shape.parts:
                 true = materials[truth.parts[part.name].material]
                 others = [x for x in materials.values() if x.substance != true.substance]
@@ -79,7 +73,7 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
                 session.add(blind)
                 session.flush()
                 session.add(m.Alignment(pair_id=blind.id, method="flow-crf",
-                                        crf_blob=store.put_image(np.zeros_like(labels, np.uint8))))
+                                        crf_blob=store.put_image(np.zeros_like(true_map))))
                 session.add_all([m.Assignment(pair_id=blind.id, part_id=part.id, method="classifier",
                                               method_key=f"classifier:{classifier.id}", classifier_id=classifier.id,
                                               rank=1, material_id=untrained_id, score=1.0, params_hash="planted")
