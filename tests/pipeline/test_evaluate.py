@@ -348,6 +348,12 @@ def test_material_top1_top5_and_substance_accuracy(db_url: str, store: BlobStore
         ("color-match", "material_top1"): (1.0, 4),
         ("color-match", "material_top5"): (1.0, 4),
         ("color-match", "substance_accuracy"): (0.75, 4),
+        # every other method minus ours (the newest classifier), over the same exemplars
+        ("builtin", "material_top1_vs_ours"): (-0.25, 4),
+        ("builtin", "material_top5_vs_ours"): (-0.75, 4),
+        ("color-match", "material_top1_vs_ours"): (0.75, 4),
+        ("color-match", "material_top5_vs_ours"): (0.25, 4),
+        ("color-match", "substance_accuracy_vs_ours"): (0.0, 4),
     }
 
 
@@ -361,6 +367,25 @@ def test_inference_figures_are_means_over_parts_of_all_pairs(db_url: str, store:
     with session_scope(db_url) as session:
         metrics = by_name(ev.evaluate_inference(session, store, truths_of(db_url, made), rerender_max_pairs=0))
     assert metrics[("color-match", "material_top1")] == (pytest.approx(0.6), 5)
+
+
+def test_inference_figures_carry_an_interval_over_exemplars(db_url: str, store: BlobStore, tmp_path: Path) -> None:
+    """Two photos, one 2-of-4 and one 1-of-1: the interval is the means of the exemplar resamples
+    (all photo: 0.5, all photo2: 1.0), so it spans 0.5 to 1.0 around the pooled 0.6; one photo gives none."""
+    made = build_scene(db_url, store, tmp_path / "demo", {"photo": TRUTH, "photo2": ALL_SEAT},
+                       {"photo": PART_MAP, "photo2": TOP_HALF})
+    add_assignments(db_url, made, "photo", "color-match",
+                    {1: ["red_leather"], 2: ["blue_leather"], 3: ["oak"], 6: ["oak"]})
+    add_assignments(db_url, made, "photo2", "color-match", {1: ["red_leather"]})
+    with session_scope(db_url) as session:
+        truths = truths_of(db_url, made)
+        both = {(x.method, x.metric): x for x in ev.evaluate_inference(session, store, truths, rerender_max_pairs=0)}
+        one_id = next(iter(truths))
+        one = {(x.method, x.metric): x for x in
+               ev.evaluate_inference(session, store, {one_id: truths[one_id]}, rerender_max_pairs=0)}
+    top1 = both[("color-match", "material_top1")]
+    assert (top1.low, top1.high) == (pytest.approx(0.5), pytest.approx(1.0))
+    assert one[("color-match", "material_top1")].low is None
 
 
 def test_exemplars_outside_the_source_or_not_ok_have_no_truth(db_url: str, store: BlobStore, scene: Scene) -> None:
@@ -617,8 +642,8 @@ def test_dict_metrics_keep_numbers_pair_counts_and_turn_nan_into_none() -> None:
 
 def test_metrics_table_rounds_to_four_places() -> None:
     rows = ev.metrics_table([Metric("s", "m", "a", 2 / 3, 3), Metric("s", "m", "b", None)])
-    assert rows == [{"stage": "s", "method": "m", "metric": "a", "value": 0.6667, "count": 3},
-                    {"stage": "s", "method": "m", "metric": "b", "value": None, "count": None}]
+    assert rows == [{"stage": "s", "method": "m", "metric": "a", "value": 0.6667, "count": 3, "95% interval": ""},
+                    {"stage": "s", "method": "m", "metric": "b", "value": None, "count": None, "95% interval": ""}]
 
 
 # --- run_evaluation: every stage stored in the evaluation table --------------------------------------
@@ -637,12 +662,13 @@ def test_run_evaluation_stores_every_figure_once(db_url: str, store: BlobStore, 
         session.add(m.Classifier(name="r34", kind="material", architecture="resnet34", metrics={"val_top1": 0.5}))
     stages = ("substances", "training", "inference")
     name, metrics = ev.run_evaluation(scene.groundtruth, "t1", stages=stages, rerender_max_pairs=0)
-    assert name == "t1" and len(metrics) == 1 + 1 + 8
+    assert name == "t1" and len(metrics) == 1 + 1 + 8 + 5  # + 5 differences to ours
     rows = stored(db_url)
     params = {"groundtruth": str(scene.groundtruth), "exemplars": 1, "skipped": 0}
     assert rows[("t1", "substances", "substance-network", "part_substance_accuracy")] == (0.75, 4, params)
     assert rows[("t1", "inference", "classifier:1", "material_top5")] == (0.75, 4, params)
     assert rows[("t1", "training", "material:r34", "val_top1")] == (0.5, None, params)
+    assert rows[("t1", "inference", "color-match", "material_top1_vs_ours")] == (0.75, 4, params)
     assert len(rows) == len(metrics)
     sha = hashlib.sha256(scene.groundtruth.read_bytes()).hexdigest()
     with session_scope(db_url) as session:  # every figure tagged with the file's hash; the file registered
@@ -697,6 +723,8 @@ def test_run_evaluation_passes_shape_recall_and_part_label_accuracy_through(
     assert got[("coarse-alignment", "recall@1")] == 0.5
     assert got[("coarse-alignment", "recall@5")] == 1.0
     assert got[("coarse-alignment", "n_in_collection")] == 2.0
+    recall = next(x for x in metrics if x.metric == "recall@1")  # one hit, one miss: 0 to 1 over exemplars
+    assert (recall.low, recall.high, recall.count) == (0.0, 1.0, 2)
     assert got[("fine-alignment", "accuracy_crf")] == pytest.approx(16 / 43)
     assert got[("fine-alignment", "accuracy_flow")] == pytest.approx(8 / 43)
     assert got[("fine-alignment", "accuracy_coarse")] == 0.0

@@ -352,6 +352,8 @@ class Evaluation(Base):
     metric: Mapped[str] = mapped_column(sa.String(64))
     value: Mapped[float | None]
     count: Mapped[int | None]
+    ci_low: Mapped[float | None] = mapped_column(comment="lower end of the 95% bootstrap interval over exemplars")
+    ci_high: Mapped[float | None] = mapped_column(comment="upper end of the 95% bootstrap interval over exemplars")
     params: Mapped[dict[str, Any]] = mapped_column(default=dict)
     groundtruth_sha256: Mapped[str | None] = mapped_column(
         sa.String(64), index=True, comment="sha256 of the ground-truth file scored against (groundtruth_file)")

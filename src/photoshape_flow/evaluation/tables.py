@@ -23,7 +23,8 @@ HEADLINE_METRICS: tuple[tuple[str, str], ...] = (
     ("rerender_ssim", "SSIM"),
 )
 HEADLINE_TITLE = ("ours, then each baseline: material top-1 / top-5 and substance accuracy per scored part "
-                  "(\"vs ours\": top-1 minus ours'), re-render RMSE (lower is better) and SSIM per pair; "
+                  "(\"vs ours\": top-1 minus ours', with its paired 95% bootstrap interval over exemplars), "
+                  "re-render RMSE (lower is better) and SSIM per pair; "
                   "how many were scored is in the full table")
 STAGES_TITLE = ("shared stages: recall and pose over exemplars of a collection shape (pose: those with a "
                 "camera), part labels over pairs of the true shape with a part mask, substances over parts")
@@ -63,8 +64,11 @@ def headline_rows(metrics: Sequence[Any]) -> list[dict[str, str]]:
             found = values.get((method, metric))
             row[title] = fmt(found.value if found else None)
         top1 = values.get((method, "material_top1"))
+        paired = values.get((method, "material_top1_vs_ours"))
         if method == ours or reference is None or reference.value is None or top1 is None or top1.value is None:
             row["vs ours"] = ""
+        elif paired is not None and paired.value is not None and getattr(paired, "low", None) is not None:
+            row["vs ours"] = f"{paired.value:+.3f} ({paired.low:+.2f}, {paired.high:+.2f})"
         else:
             row["vs ours"] = f"{top1.value - reference.value:+.3f}"
         rows.append(row)

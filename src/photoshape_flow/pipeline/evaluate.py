@@ -42,6 +42,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.evaluation.bootstrap import OBSERVATIONS, Observations, difference_interval, mean_interval
 from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
@@ -60,6 +61,14 @@ class Metric:
     metric: str
     value: float | None
     count: int | None = None
+    low: float | None = None  # 95% bootstrap interval over exemplars (evaluation.bootstrap), where one exists
+    high: float | None = None
+
+
+def estimated(stage: str, method: str, metric: str, obs: Observations) -> Metric:
+    """A mean over exemplars' observations with its bootstrap interval."""
+    est = mean_interval(obs)
+    return Metric(stage, method, metric, est.value, est.count, est.low, est.high)
 
 
 # --- ground truth in the stored exemplar frame --------------------------------------------------------
@@ -147,7 +156,7 @@ def pair_truths(session: Session, store: BlobStore, pair: m.Pair, exemplar: m.Ex
 # --- stages ----------------------------------------------------------------------------------------
 
 def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, TruthEntry]) -> list[Metric]:
-    correct = total = 0
+    correct: dict[int, list[float]] = defaultdict(list)
     rows = session.execute(
         sa.select(m.PartSubstance, m.Pair, m.Part, m.Alignment, m.Exemplar)
         .join(m.Pair, m.Pair.id == m.PartSubstance.pair_id)
@@ -164,10 +173,8 @@ def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, Tr
         truth = cache[pair.id].get(part.index)
         if truth is None:
             continue
-        total += 1
-        correct += int(ps.substance == truth[1])
-    return [Metric("substances", "substance-network", "part_substance_accuracy",
-                   correct / total if total else None, total)]
+        correct[exemplar.id].append(float(ps.substance == truth[1]))
+    return [estimated("substances", "substance-network", "part_substance_accuracy", correct)]
 
 
 def evaluate_training(session: Session) -> list[Metric]:
@@ -268,7 +275,8 @@ def evaluate_inference(
     for a, part_index, name, substance in rows:
         ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
         method_of[a.method_key] = a.method
-    scores: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    # method key -> metric -> exemplar id -> values (parts, or the pair's re-render)
+    scores: dict[str, dict[str, dict[int, list[float]]]] = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
     rerender_pairs: dict[str, int] = defaultdict(int)
     rerenderer: _Rerenderer | None = None
@@ -288,10 +296,11 @@ def evaluate_inference(
             if truth is None:
                 continue
             names = [c[0] for c in choices]
-            scores[method_key]["material_top1"].append(float(names[:1] == [truth[0]]))
-            scores[method_key]["material_top5"].append(float(truth[0] in names[:5]))
+            observed = scores[method_key]
+            observed["material_top1"][exemplar.id].append(float(names[:1] == [truth[0]]))
+            observed["material_top5"][exemplar.id].append(float(truth[0] in names[:5]))
             if choices[0][1] is not None:
-                scores[method_key]["substance_accuracy"].append(float(choices[0][1] == truth[1]))
+                observed["substance_accuracy"][exemplar.id].append(float(choices[0][1] == truth[1]))
         # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
         if pair.exemplar_rank not in (None, 1):
             continue
@@ -312,25 +321,49 @@ def evaluate_inference(
             log.warning("pair %s: re-render failed: %s", pair_id, exc)
             continue
         rerender_pairs[method_key] += 1
-        scores[method_key]["rerender_rmse"].append(rmse)
-        scores[method_key]["rerender_ssim"].append(ssim)
-    out = []
+        scores[method_key]["rerender_rmse"][exemplar.id].append(rmse)
+        scores[method_key]["rerender_ssim"][exemplar.id].append(ssim)
+    return inference_metrics(scores)
+
+
+def ours_key(method_keys: Iterable[str]) -> str | None:
+    """The newest classifier's method key ("classifier:<highest id>"): what every other method is compared with."""
+    ours = [k for k in method_keys if k.partition(":")[0] == "classifier" and k.partition(":")[2].isdigit()]
+    return max(ours, key=lambda k: int(k.partition(":")[2]), default=None)
+
+
+def inference_metrics(scores: dict[str, dict[str, Observations]]) -> list[Metric]:
+    """Each method's means with intervals, and each other method minus ours with a paired interval
+    (metric ``<name>_vs_ours``: same exemplars resampled for both, so it says whether a gain is real)."""
+    out = [estimated("inference", method_key, metric, obs)
+           for method_key, metrics in sorted(scores.items()) for metric, obs in sorted(metrics.items())]
+    ours = ours_key(scores)
     for method_key, metrics in sorted(scores.items()):
-        for metric, values in sorted(metrics.items()):
-            finite = [v for v in values if not math.isnan(v)]
-            out.append(Metric("inference", method_key, metric, float(np.mean(finite)) if finite else None, len(finite)))
+        if ours is None or method_key == ours:
+            continue
+        for metric, obs in sorted(metrics.items()):
+            if metric in scores[ours]:
+                est = difference_interval(obs, scores[ours][metric])
+                out.append(Metric("inference", method_key, f"{metric}_vs_ours", est.value, est.count,
+                                  est.low, est.high))
     return out
 
 
 def _dict_metrics(stage: str, method: str, values: dict[str, Any]) -> list[Metric]:
+    """A stage evaluator's numbers as Metrics; a mean it gave observations for gets their interval."""
+    observations = values.get(OBSERVATIONS) or {}
     out = []
     for key, value in values.items():
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue
         count_key = f"{key}_count"
         count = values.get(count_key) if isinstance(values.get(count_key), int) else None
-        out.append(Metric(stage, method, key, None if (isinstance(value, float) and math.isnan(value))
-                          else float(value), count))
+        value = None if (isinstance(value, float) and math.isnan(value)) else float(value)
+        low = high = None
+        if key in observations:
+            est = mean_interval(observations[key])
+            low, high, count = est.low, est.high, count if count is not None else est.count
+        out.append(Metric(stage, method, key, value, count, low, high))
     return out
 
 
@@ -391,7 +424,8 @@ def run_evaluation(
         for metric in metrics:
             upsert(session, m.Evaluation, {
                 "run": run, "stage": metric.stage, "method": metric.method, "metric": metric.metric,
-                "value": metric.value, "count": metric.count, "params": params, "groundtruth_sha256": gt.sha256,
+                "value": metric.value, "count": metric.count, "ci_low": metric.low, "ci_high": metric.high,
+                "params": params, "groundtruth_sha256": gt.sha256,
             }, key=["run", "stage", "method", "metric"])
         register_groundtruth(session, gt, len(truths), len(matched.problems))
     return run, metrics
@@ -401,6 +435,7 @@ def metrics_table(metrics: Sequence[Metric]) -> list[dict[str, Any]]:
     """Rows for a table (CLI, Prefect artifact, docs)."""
     return [
         {"stage": x.stage, "method": x.method, "metric": x.metric,
-         "value": None if x.value is None else round(x.value, 4), "count": x.count}
+         "value": None if x.value is None else round(x.value, 4), "count": x.count,
+         "95% interval": "" if x.low is None or x.high is None else f"{x.low:.3f} to {x.high:.3f}"}
         for x in metrics
     ]

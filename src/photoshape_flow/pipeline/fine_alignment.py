@@ -33,6 +33,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.demo.groundtruth import exemplar_records, record_field, record_for_source, record_mask
+from photoshape_flow.evaluation.bootstrap import OBSERVATIONS
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
@@ -274,6 +275,7 @@ def evaluate_fine_alignment(
     accuracy: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
     in_mask: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
     iou_other: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
+    per_exemplar: dict[str, dict[int, list[float]]] = {f"accuracy_{name}": {} for name in accuracy}
     skipped = 0
     for alignment, exemplar, shape in rows:
         entry = record_for_source(truths, exemplar.source_id)
@@ -303,6 +305,7 @@ def evaluate_fine_alignment(
             continue
         for name, value in scores.items():
             accuracy[name].append(value)
+            per_exemplar[f"accuracy_{name}"].setdefault(exemplar.id, []).append(float(value))
             setattr(alignment, f"accuracy_{name}", float(value))
         if exemplar.mask_blob:  # diagnostic: the same inside the exemplar's (ingest) mask only
             _, fg = exemplar_at(store.load_image(exemplar.image_blob), store.load_image(exemplar.mask_blob), size)
@@ -324,6 +327,7 @@ def evaluate_fine_alignment(
         result[f"iou_other_{name}"] = mean(iou_other[name])
     result["flow_improves"] = bool(result["accuracy_flow"] > result["accuracy_coarse"]) if accuracy["crf"] else None
     result["crf_improves"] = bool(result["accuracy_crf"] > result["accuracy_flow"]) if accuracy["crf"] else None
+    result[OBSERVATIONS] = per_exemplar
     return result
 
 

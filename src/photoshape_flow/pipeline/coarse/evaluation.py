@@ -13,6 +13,7 @@ from photoshape_flow.align.viewpoints import angular_errors_deg, cameras_from_ro
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.demo.groundtruth import exemplar_records, record_field, source_keys
+from photoshape_flow.evaluation.bootstrap import OBSERVATIONS
 from photoshape_flow.pipeline.coarse.config import CoarseConfig
 from photoshape_flow.pipeline.coarse.reverse_index import load_reverse_index
 from photoshape_flow.pipeline.coarse.viewpoint_sets import config_viewpoint_set
@@ -26,7 +27,7 @@ def evaluate_coarse_alignment(
     config: CoarseConfig | None = None,
     renderer: Any = None,
     iou_size: int = 128,
-) -> dict[str, float]:
+) -> dict[str, Any]:
     """Shape recall, pose error and silhouette IoU of the reverse index against demo ground truth.
 
     `groundtruth` is the demo's `GroundTruth` (``demo.groundtruth.load_groundtruth``) or a mapping from
@@ -36,7 +37,8 @@ def evaluate_coarse_alignment(
     the pose error is measured at the true shape's entry when it was retrieved (median degrees,
     azimuth wrapped); the silhouette IoU renders the top-1 shape's part IDs at the retrieved camera,
     crops it like the exemplar and compares it with the exemplar's mask (``iou_nearest``: exemplars
-    whose shape is not in the collection, ``iou_in_collection``: the others).
+    whose shape is not in the collection, ``iou_in_collection``: the others). Under `OBSERVATIONS`,
+    each mean's values per exemplar id, for its bootstrap interval.
     """
     config = config or CoarseConfig()
     store = BlobStore(get_settings().blob_root)
@@ -56,6 +58,8 @@ def evaluate_coarse_alignment(
     az_err: list[float] = []
     el_err: list[float] = []
     iou: dict[bool, list[float]] = {True: [], False: []}
+    per_exemplar: dict[str, dict[int, list[float]]] = {
+        "recall@1": {}, "recall@5": {}, "mean_iou_nearest": {}, "mean_iou_in_collection": {}}
     mesh_cache: dict[int, Any] = {}
     for stem, truth in exemplar_records(groundtruth).items():
         found = by_stem.get(str(stem))
@@ -70,6 +74,7 @@ def evaluate_coarse_alignment(
             n_in += 1
             for k in hits:
                 hits[k] += int(true_sid in retrieved[:k])
+                per_exemplar[f"recall@{k}"][eid] = [float(true_sid in retrieved[:k])]
             camera = record_field(truth, "camera")
             if true_sid in retrieved and camera is not None:
                 view = int(listed[retrieved.index(true_sid), 1])
@@ -94,6 +99,8 @@ def evaluate_coarse_alignment(
             theirs = crop_mask(store.load_image(mask_blob), iou_size)
             union = np.logical_or(ours, theirs).sum()
             iou[in_collection].append(float(np.logical_and(ours, theirs).sum() / union) if union else 0.0)
+            key = "mean_iou_in_collection" if in_collection else "mean_iou_nearest"
+            per_exemplar[key][eid] = [iou[in_collection][-1]]
 
     def median(values: list[float]) -> float:
         return float(np.median(values)) if values else float("nan")
@@ -112,4 +119,5 @@ def evaluate_coarse_alignment(
         "median_iou_nearest": median(iou[False]),
         "n_nearest": float(len(iou[False])),
         "mean_iou_in_collection": mean(iou[True]),
+        OBSERVATIONS: per_exemplar,
     }
