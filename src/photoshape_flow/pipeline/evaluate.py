@@ -256,11 +256,37 @@ def rerender_error(render: np.ndarray, exemplar: np.ndarray, mask: np.ndarray) -
     return rmse, float(ssim_map[mask].mean())
 
 
+# method key -> metric -> exemplar id -> values (one per scored part, or the pair's re-render)
+Scores = dict[str, dict[str, dict[int, list[float]]]]
+
+
 def evaluate_inference(
     session: Session, store: BlobStore, truths: dict[int, TruthEntry], *, rerender_size: int = 128,
     rerender_spp: int = 16, rerender_max_pairs: int | None = 200, progress: Progress | None = None,
 ) -> list[Metric]:
     """Material top-1/top-5 and substance accuracy per part, re-render RMSE/SSIM per pair, per method."""
+    return inference_metrics(inference_observations(
+        session, store, truths, rerender_size=rerender_size, rerender_spp=rerender_spp,
+        rerender_max_pairs=rerender_max_pairs, progress=progress))
+
+
+def merge_scores(batches: Iterable[Scores]) -> Scores:
+    """The observations of several exemplar batches as one (batches hold disjoint exemplars)."""
+    merged: Scores = defaultdict(lambda: defaultdict(dict))
+    for batch in batches:
+        for method_key, metrics in batch.items():
+            for metric, obs in metrics.items():
+                for exemplar_id, values in obs.items():
+                    merged[method_key][metric].setdefault(int(exemplar_id), []).extend(values)
+    return {k: dict(v) for k, v in merged.items()}
+
+
+def inference_observations(
+    session: Session, store: BlobStore, truths: dict[int, TruthEntry], *, rerender_size: int = 128,
+    rerender_spp: int = 16, rerender_max_pairs: int | None = 200, progress: Progress | None = None,
+) -> Scores:
+    """Every method's per-exemplar observations (the inference figures before they are pooled):
+    exemplar batches can be scored apart, on other workers, and merged (`merge_scores`)."""
     rows = session.execute(
         sa.select(m.Assignment, m.Part.index, m.Material.name, m.Material.substance)
         .join(m.Part, m.Part.id == m.Assignment.part_id)
@@ -275,8 +301,7 @@ def evaluate_inference(
     for a, part_index, name, substance in rows:
         ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
         method_of[a.method_key] = a.method
-    # method key -> metric -> exemplar id -> values (parts, or the pair's re-render)
-    scores: dict[str, dict[str, dict[int, list[float]]]] = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
+    scores: Scores = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
     rerender_pairs: dict[str, int] = defaultdict(int)
     rerenderer: _Rerenderer | None = None
@@ -323,7 +348,7 @@ def evaluate_inference(
         rerender_pairs[method_key] += 1
         scores[method_key]["rerender_rmse"][exemplar.id].append(rmse)
         scores[method_key]["rerender_ssim"][exemplar.id].append(ssim)
-    return inference_metrics(scores)
+    return {k: {metric: dict(obs) for metric, obs in v.items()} for k, v in scores.items()}
 
 
 def ours_key(method_keys: Iterable[str]) -> str | None:
@@ -332,7 +357,7 @@ def ours_key(method_keys: Iterable[str]) -> str | None:
     return max(ours, key=lambda k: int(k.partition(":")[2]), default=None)
 
 
-def inference_metrics(scores: dict[str, dict[str, Observations]]) -> list[Metric]:
+def inference_metrics(scores: Scores) -> list[Metric]:
     """Each method's means with intervals, and each other method minus ours with a paired interval
     (metric ``<name>_vs_ours``: same exemplars resampled for both, so it says whether a gain is real)."""
     out = [estimated("inference", method_key, metric, obs)
@@ -379,13 +404,16 @@ def run_evaluation(
     rerender_max_pairs: int | None = 200,
     on_problem: Callable[[str], None] | None = None,
     progress: Progress | None = None,
+    inference_scores: Scores | None = None,
 ) -> tuple[str, list[Metric]]:
     """Evaluate what the database holds against a ground-truth file; stores and returns the metrics.
 
     Each entry left out (malformed, or naming what the database lacks) is passed to `on_problem`
     (default: a warning in the log) and the others are scored; the file is registered as the default
     for the next evaluation, and every stored figure carries its sha256. Raises ValueError when the
-    file is unreadable or no entry matches an ingested exemplar.
+    file is unreadable or no entry matches an ingested exemplar. `inference_scores`: the inference
+    observations scored elsewhere in exemplar batches (`evaluation_batches`, `score_batch`), used
+    instead of scoring them here.
     """
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
@@ -415,7 +443,9 @@ def run_evaluation(
             metrics += evaluate_substances(session, store, truths)
         if "training" in stages:
             metrics += evaluate_training(session)
-        if "inference" in stages:
+        if "inference" in stages and inference_scores is not None:  # scored in exemplar batches already
+            metrics += inference_metrics(inference_scores)
+        elif "inference" in stages:
             metrics += evaluate_inference(session, store, truths, rerender_size=rerender_size,
                                           rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs,
                                           progress=progress)
@@ -429,6 +459,31 @@ def run_evaluation(
             }, key=["run", "stage", "method", "metric"])
         register_groundtruth(session, gt, len(truths), len(matched.problems))
     return run, metrics
+
+
+def evaluation_batches(groundtruth: str | Path, batch_size: int, *, exemplar_source: str | None = None,
+                       settings: Settings | None = None) -> list[list[int]]:
+    """The matched exemplars' ids in batches of `batch_size`, for scoring the inference figures apart."""
+    settings = settings or get_settings()
+    gt = read_groundtruth_file(groundtruth)
+    with session_scope(settings.resolved_database_url) as session:
+        ids = sorted(match_groundtruth(session, gt, exemplar_source).truths)
+    size = max(1, int(batch_size))
+    return [ids[i:i + size] for i in range(0, len(ids), size)]
+
+
+def score_batch(groundtruth: str | Path, exemplar_ids: Sequence[int], *, exemplar_source: str | None = None,
+                settings: Settings | None = None, rerender_size: int = 128, rerender_spp: int = 16,
+                rerender_max_pairs: int | None = None) -> Scores:
+    """The inference observations of some matched exemplars (one batch of the evaluate flow)."""
+    settings = settings or get_settings()
+    store = BlobStore(settings.blob_root)
+    gt = read_groundtruth_file(groundtruth)
+    wanted = {int(i) for i in exemplar_ids}
+    with session_scope(settings.resolved_database_url) as session:
+        truths = {k: v for k, v in match_groundtruth(session, gt, exemplar_source).truths.items() if k in wanted}
+        return inference_observations(session, store, truths, rerender_size=rerender_size,
+                                      rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs)
 
 
 def metrics_table(metrics: Sequence[Metric]) -> list[dict[str, Any]]:
