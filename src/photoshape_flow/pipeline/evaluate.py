@@ -188,6 +188,43 @@ def evaluate_training(session: Session) -> list[Metric]:
     return out
 
 
+class RelightingScores:
+    """The relighting error of each (pair, method) whose pair shows the exemplar's own shape
+    (`relighting_eval`): the true materials' renders are made once per pair, at most `max_pairs`
+    pairs per method are rendered."""
+
+    def __init__(self, store: BlobStore, size: int, spp: int, max_pairs: int | None):
+        self.store, self.size, self.spp, self.max_pairs = store, size, spp, max_pairs
+        self.relighter: Any = None
+        self.truth_views: dict[int, Any] = {}  # pair id -> the true render's views (None: no true render)
+        self.pairs: dict[str, int] = defaultdict(int)
+
+    def wants(self, session: Session, pair: m.Pair, method_key: str, truth: TruthEntry) -> bool:
+        if self.max_pairs is not None and self.pairs[method_key] >= self.max_pairs:
+            return False
+        shape = session.get(m.Shape, pair.shape_id)
+        return bool(truth.in_collection) and shape is not None and shape.source_id == truth.shape
+
+    def error(self, session: Session, pair: m.Pair, method_key: str, chosen: dict[int, int | None],
+              truth: TruthEntry) -> float | None:
+        from photoshape_flow.pipeline.relighting_eval import Relighter, relighting_error, true_materials
+
+        try:
+            if self.relighter is None:
+                self.relighter = Relighter(session, self.store, self.size, self.spp)
+            if pair.id not in self.truth_views:
+                true = true_materials(session, session.get(m.Shape, pair.shape_id), truth)
+                self.truth_views[pair.id] = None if true is None else self.relighter.views(session, pair, true)
+            if self.truth_views[pair.id] is None:
+                return None
+            value = relighting_error(self.relighter, session, pair, chosen, self.truth_views[pair.id])
+        except Exception as exc:  # one unrenderable pair never stops the evaluation
+            log.warning("pair %s: relighting render failed: %s", pair.id, exc)
+            return None
+        self.pairs[method_key] += 1
+        return value if math.isfinite(value) else None
+
+
 class _Rerenderer:
     """Renders a pair's PhotoShape at the exemplar's camera, cropped like the exemplar."""
 
@@ -263,11 +300,13 @@ Scores = dict[str, dict[str, dict[int, list[float]]]]
 def evaluate_inference(
     session: Session, store: BlobStore, truths: dict[int, TruthEntry], *, rerender_size: int = 128,
     rerender_spp: int = 16, rerender_max_pairs: int | None = 200, progress: Progress | None = None,
+    relight_max_pairs: int | None = 200,
 ) -> list[Metric]:
-    """Material top-1/top-5 and substance accuracy per part, re-render RMSE/SSIM per pair, per method."""
+    """Material top-1/top-5 and substance accuracy per part, re-render RMSE/SSIM per pair and the
+    relighting error of pairs of the exemplar's own shape, per method."""
     return inference_metrics(inference_observations(
         session, store, truths, rerender_size=rerender_size, rerender_spp=rerender_spp,
-        rerender_max_pairs=rerender_max_pairs, progress=progress))
+        rerender_max_pairs=rerender_max_pairs, progress=progress, relight_max_pairs=relight_max_pairs))
 
 
 def merge_scores(batches: Iterable[Scores]) -> Scores:
@@ -284,6 +323,7 @@ def merge_scores(batches: Iterable[Scores]) -> Scores:
 def inference_observations(
     session: Session, store: BlobStore, truths: dict[int, TruthEntry], *, rerender_size: int = 128,
     rerender_spp: int = 16, rerender_max_pairs: int | None = 200, progress: Progress | None = None,
+    relight_size: int = 96, relight_max_pairs: int | None = 200,
 ) -> Scores:
     """Every method's per-exemplar observations (the inference figures before they are pooled):
     exemplar batches can be scored apart, on other workers, and merged (`merge_scores`)."""
@@ -302,6 +342,7 @@ def inference_observations(
         ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
         method_of[a.method_key] = a.method
     scores: Scores = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
+    relight = RelightingScores(store, relight_size, rerender_spp, relight_max_pairs)
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
     rerender_pairs: dict[str, int] = defaultdict(int)
     rerenderer: _Rerenderer | None = None
@@ -326,6 +367,11 @@ def inference_observations(
             observed["material_top5"][exemplar.id].append(float(truth[0] in names[:5]))
             if choices[0][1] is not None:
                 observed["substance_accuracy"][exemplar.id].append(float(choices[0][1] == truth[1]))
+        if relight.wants(session, pair, method_key, truths[exemplar.id]):
+            chosen = {idx: c[0][2] for idx, c in parts.items()}
+            value = relight.error(session, pair, method_key, chosen, truths[exemplar.id])
+            if value is not None:
+                scores[method_key]["relight_rmse"][exemplar.id].append(value)
         # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
         if pair.exemplar_rank not in (None, 1):
             continue
@@ -483,7 +529,8 @@ def score_batch(groundtruth: str | Path, exemplar_ids: Sequence[int], *, exempla
     with session_scope(settings.resolved_database_url) as session:
         truths = {k: v for k, v in match_groundtruth(session, gt, exemplar_source).truths.items() if k in wanted}
         return inference_observations(session, store, truths, rerender_size=rerender_size,
-                                      rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs)
+                                      rerender_spp=rerender_spp, rerender_max_pairs=rerender_max_pairs,
+                                      relight_max_pairs=rerender_max_pairs)
 
 
 def metrics_table(metrics: Sequence[Metric]) -> list[dict[str, Any]]:

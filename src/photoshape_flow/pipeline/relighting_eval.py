@@ -1,0 +1,120 @@
+"""Relighting error: does the PhotoShape look right under light and from views the photo never showed?
+
+The re-render error at the exemplar's camera rewards a method for matching that one photo (and `fit`
+minimises exactly that), so it cannot tell a right material from one that only looks right there. The
+relighting error renders the *true* shape twice, with a method's rank-1 materials and with the ground
+truth's, under a held-out envmap (one the pipeline did not train with, where the collection has one)
+from three novel views (the pair's camera turned by 90, 180 and 270 degrees), and takes the RMSE of
+the two inside the silhouette. Only pairs whose shape is the exemplar's own count, and only when every
+part's true material is in the library (otherwise there is no "true" render to compare with).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from photoshape_flow.db import models as m
+from photoshape_flow.evaluation.groundtruth import TruthEntry
+from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import STATUS_OK
+
+NOVEL_VIEWS_DEG = (90.0, 180.0, 270.0)  # azimuth turns from the pair's camera
+
+
+def silhouette_rmse(a: np.ndarray, b: np.ndarray, alpha: np.ndarray) -> float:
+    """RMSE of two sRGB renders (uint8) over the pixels of `alpha` (NaN when empty)."""
+    mask = np.asarray(alpha, bool)
+    if not mask.any():
+        return float("nan")
+    diff = a.astype(np.float64) / 255.0 - b.astype(np.float64) / 255.0
+    return float(np.sqrt((diff ** 2)[mask].mean()))
+
+
+def held_out_envmap(session: Session) -> m.Envmap | None:
+    """The first enabled envmap not in the training split; else the PhotoShapes' studio envmap."""
+    rows = session.execute(
+        sa.select(m.Envmap).where(m.Envmap.enabled, m.Envmap.status == STATUS_OK, m.Envmap.blob.is_not(None))
+        .order_by(m.Envmap.id)
+    ).scalars().all()
+    held = [e for e in rows if (e.split or "train") != "train"]
+    if held:
+        return held[0]
+    from photoshape_flow.pipeline.photoshapes import choose_envmap
+
+    return choose_envmap(session)
+
+
+def true_materials(session: Session, shape: m.Shape, truth: TruthEntry) -> dict[int, int] | None:
+    """Part index -> the id of the library material the truth names for it; None when a part has no
+    truth or its material is not ingested (no true render can be made)."""
+    names = {name: p.material for name, p in truth.parts.items()}
+    wanted = {part.index: names.get(part.name or "") for part in shape.parts}
+    if not wanted or any(v is None for v in wanted.values()):
+        return None
+    ids = dict(session.execute(sa.select(m.Material.name, m.Material.id)
+                               .where(m.Material.name.in_(set(wanted.values())))).all())
+    if any(name not in ids for name in wanted.values()):
+        return None
+    return {index: ids[name] for index, name in wanted.items()}
+
+
+class Relighter:
+    """Renders a shape with given materials under one envmap from the three novel views of a pair."""
+
+    def __init__(self, session: Session, store: BlobStore, size: int, spp: int):
+        from photoshape_flow.render import EnvmapSpec, Renderer
+
+        self.store = store
+        self.size = size
+        self.spp = spp
+        self.renderer = Renderer(resolve=store.resolve)
+        row = held_out_envmap(session)
+        self.envmap_name = row.name if row is not None else None
+        self.envmap = EnvmapSpec(store.resolve(row.blob)) if row is not None else None
+        self.meshes: dict[int, Any] = {}
+        self.materials: dict[int, Any] = {}
+
+    def _mesh(self, session: Session, shape_id: int) -> Any:
+        from photoshape_flow.geometry.mesh import ShapeMesh
+
+        if shape_id not in self.meshes:
+            self.meshes[shape_id] = ShapeMesh.from_npz_bytes(
+                self.store.read_bytes(session.get(m.Shape, shape_id).mesh_blob))
+        return self.meshes[shape_id]
+
+    def _material(self, session: Session, material_id: int) -> Any:
+        if material_id not in self.materials:
+            from photoshape_flow.pipeline.training_renders import material_spec
+
+            self.materials[material_id] = material_spec(session.get(m.Material, material_id), self.store)
+        return self.materials[material_id]
+
+    def views(self, session: Session, pair: m.Pair, materials: Mapping[int, int | None]) -> list[tuple[Any, Any]]:
+        """(sRGB uint8, alpha mask) of each novel view."""
+        from photoshape_flow.align.partmap import zoom_to_fit
+        from photoshape_flow.render import Camera
+
+        mesh = self._mesh(session, pair.shape_id)
+        specs = [self._material(session, mid) if (mid := materials.get(p.index)) else None for p in mesh.parts]
+        out = []
+        for turn in NOVEL_VIEWS_DEG:
+            camera = zoom_to_fit(mesh, Camera(pair.azimuth + math.radians(turn), pair.elevation,
+                                              pair.camera_distance, pair.fov))
+            result = self.renderer.beauty(mesh, specs, camera, self.envmap, size=self.size, spp=self.spp, seed=0)
+            out.append((result.srgb, result.alpha > 0.5))
+        return out
+
+
+def relighting_error(relighter: Relighter, session: Session, pair: m.Pair, predicted: Mapping[int, int | None],
+                     truth_views: list[tuple[Any, Any]]) -> float:
+    """Mean over the novel views of the silhouette RMSE between the predicted and the true render."""
+    values = [silhouette_rmse(p[0], t[0], t[1] | p[1])
+              for p, t in zip(relighter.views(session, pair, predicted), truth_views, strict=True)]
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
