@@ -20,7 +20,7 @@ def test_headline_puts_ours_first_then_the_baselines_with_the_gap_in_top1() -> N
     rows = headline_rows(metrics)
     assert [r["method"] for r in rows] == ["ours (classifier 2)", "ours (classifier 1)", "color-match", "builtin"]
     assert rows[0] == {"method": "ours (classifier 2)", "top-1": "0.750", "top-5": "-", "subst.": "-", "RMSE": "-",
-                       "SSIM": "-", "vs ours": ""}
+                       "SSIM": "-", "relit": "-", "vs ours": ""}
     assert [r["vs ours"] for r in rows[1:]] == ["-0.125", "-0.250", ""]  # builtin has no top-1
     assert rows[3]["RMSE"] == "0.250"
     assert headline_rows(metrics[-1:]) == []

@@ -21,10 +21,12 @@ HEADLINE_METRICS: tuple[tuple[str, str], ...] = (
     ("substance_accuracy", "subst."),
     ("rerender_rmse", "RMSE"),
     ("rerender_ssim", "SSIM"),
+    ("relight_rmse", "relit"),
 )
 HEADLINE_TITLE = ("ours, then each baseline: material top-1 / top-5 and substance accuracy per scored part "
                   "(\"vs ours\": top-1 minus ours', with its paired 95% bootstrap interval over exemplars), "
-                  "re-render RMSE (lower is better) and SSIM per pair; "
+                  "re-render RMSE (lower is better) and SSIM per pair, relighting RMSE (\"relit\", lower is "
+                  "better: held-out light, novel views, own shape); "
                   "how many were scored is in the full table")
 STAGES_TITLE = ("shared stages: recall and pose over exemplars of a collection shape (pose: those with a "
                 "camera), part labels over pairs of the true shape with a part mask, substances over parts")
