@@ -172,3 +172,16 @@ def test_blender_renders_a_scene_and_its_exact_part_mask(tmp_path):
     assert (mask[:, :16] != 2).all() and (mask[:, 16:] != 1).all()  # part 1 left, part 2 right
     beauty = scenes.read_render(tmp_path / "b.png")
     assert (beauty[..., 3][mask > 0] > 0).all() and beauty[0, 0, 3] == 0  # transparent film
+
+
+def test_report_shares_split_by_the_worlds_own_keys() -> None:
+    from types import SimpleNamespace
+
+    from experiments.second_world.report import markdown, shares
+
+    raw = {"exemplars": [{"source_id": "a", "open_library": True}, {"source_id": "b"}, {"source_id": "c"}]}
+    truths = {1: SimpleNamespace(stem="a", in_collection=True), 2: SimpleNamespace(stem="b", in_collection=False),
+              3: SimpleNamespace(stem="c", in_collection=True)}
+    assert shares(raw, truths) == {"all": {1, 2, 3}, "open library": {1}, "library materials": {2, 3},
+                                   "shape in collection": {1, 3}, "shape held out": {2}}
+    assert markdown([{"x": 1}], ["x"]).splitlines() == ["| x |", "|---|", "| 1 |"]
