@@ -3,8 +3,8 @@
 The tiny demo's in-collection exemplars are planted as pairs at the true camera with the true part map
 (`tests.pipeline.aligned.plant_true_pair`) and a planted classifier ranking that is always wrong; the
 material that most in-collection parts truly wear (fabric_blue_twill when written: the demo's only
-blue material) is left out of the first ingest, so the first fit cannot choose it. Then it is
-ingested for real, and the material-added re-run (`photoshape new-materials`' in-process path) must
+blue material) is removed before the first fit, so that fit cannot choose it. Then it is
+ingested again for real, and the material-added re-run (`photoshape new-materials`' in-process path) must
 re-fit the affected pairs only, let the new material win parts it truly covers, publish them with
 `publish.method=fit`, and report counts that match the rows.
 """
