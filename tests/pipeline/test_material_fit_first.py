@@ -4,13 +4,14 @@ The tiny demo's in-collection exemplars are planted as pairs at the true camera 
 (`tests.pipeline.aligned.plant_true_pair`) and a planted classifier ranking that is always wrong; the
 material that most in-collection parts truly wear (fabric_blue_twill when written: the demo's only
 blue material) is removed before the first fit, so that fit cannot choose it. Then it is
-ingested again for real, and the material-added re-run (`photoshape new-materials`' in-process path) must
+ingested again for real, and the material-added re-run (`photoshape new-materials`, run as a user runs it) must
 re-fit the affected pairs only, let the new material win parts it truly covers, publish them with
 `publish.method=fit`, and report counts that match the rows.
 """
 
 from __future__ import annotations
 
+import re
 from collections import Counter
 from pathlib import Path
 
@@ -84,16 +85,19 @@ def _first_fit(url: str) -> dict[tuple[int, int], int]:
 
 def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path, db_url: str,
                                                                  store: BlobStore) -> None:
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
     from photoshape_flow.pipeline.ingest import ingest_materials
     from photoshape_flow.pipeline.new_materials import plan_material_rerun
     from photoshape_flow.pipeline.photoshapes import assignment_set_keys
-    from photoshape_flow.stages import StageContext
-    from photoshape_flow.stages.rerun import run_material_rerun
-    from photoshape_flow.stages.run import run_stage
+    from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.stages import StageContext, run_all
 
     truth_of, held_out = _plant(tiny_demo, db_url, store)
-    ctx = StageContext.create()
-    assert run_stage("fit", "tiny", ctx).done == len({p for p, _ in truth_of})
+    # the collection's last run: fit, with publish.method=fit recorded (the re-run inherits both)
+    (fitted,) = run_all(resolve_profile("tiny", ["publish.method=fit"]), StageContext.create(), names=["fit"])
+    assert fitted.done == len({p for p, _ in truth_of})
     before = _first_fit(db_url)
     (new_id,) = ingest_materials([held_out], source="demo-tiny", previews=False).added
     with session_scope(db_url) as session:
@@ -103,7 +107,8 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
     assert rerun.new_ids == [new_id] and rerun.stages == ["fit", "publish"]
     assert set(rerun.pairs) == {p for p, _ in truth_of}  # every planted pair has an observed part
 
-    reports, changes = run_material_rerun(rerun, ctx)
+    result = CliRunner().invoke(app, ["new-materials", "--renders-per-material", "6"])
+    assert result.exit_code == 0, result.output
 
     after = _first_fit(db_url)
     won = {key for key, mid in after.items() if mid == new_id}
@@ -121,13 +126,14 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
         keys = assignment_set_keys(session, [(p, fit_key) for p in published])
     # the new material wins parts it truly covers, through fit alone
     assert won and all(truth_of[key] == new_name for key in won), (won, new_name)
-    assert changes.won_by_new == len(won)
-    assert changes.changed == sum(after[key] != before.get(key) for key in after)
-    assert changes.grown == observed  # it joined every observed part's candidates
-    assert changes.parts == len(after) and changes.changed >= len(won)
-    assert run.stages == ["fit", "publish"] and run.status == "ok"
-    assert run.reports["fit"]["details"]["changes"] == changes.as_dict()
-    assert [r.stage for r in reports] == ["fit", "publish"] and reports[0].done == len(rerun.pairs)
+    changes = run.reports["fit"]["details"]["changes"]
+    assert changes == {"parts": len(after), "grown": observed,  # it joined every observed part's candidates
+                       "changed": sum(after[key] != before.get(key) for key in after), "won_by_new": len(won)}
+    assert changes["changed"] >= len(won)
+    assert (run.profile_name, run.overrides["publish.method"], run.status) == ("tiny", "fit", "ok")
+    assert run.stages == ["fit", "publish"] and run.reports["fit"]["done"] == len(rerun.pairs)
+    row = re.search(r"parts changed \(fit:\d+\)\s*\n(?:.*\n){3}\W*(\d+)\W+(\d+)\W+(\d+)\W+(\d+)", result.output)
+    assert row and [int(x) for x in row.groups()] == list(changes.values()), result.output
     # publish.method=fit: the pairs whose parts the new material won are published with fit's rows
     assert {p for p, _ in won} <= set(published)
     for pair_id, params in published.items():
