@@ -90,3 +90,23 @@ def test_publish_up_to_date_check_is_keyed_by_the_chosen_methods_assignment_set(
         keys = assignment_set_keys(session, [(pair, f"classifier:{clf}"), (pair, f"fit:{clf}")])
     assert keyed["classifier"] == {pair: keys[(pair, f"classifier:{clf}")]}
     assert keyed["fit"] == {pair: keys[(pair, f"fit:{clf}")]} != keyed["classifier"]
+
+
+def test_the_gallery_lists_the_candidates_of_the_chosen_method(db_url: str, settings_env) -> None:  # type: ignore[no-untyped-def]
+    from tests.db.seed import seed
+
+    from photoshape_flow.db.session import session_scope
+    from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.stages import StageContext
+    from photoshape_flow.stages.publish import finish
+
+    with session_scope(db_url) as session:
+        ids = seed(session)
+    pair, clf = ids["pair"], ids["classifier"]
+    for method in ("classifier", "fit"):
+        report = finish(StageContext.create(), resolve_profile("tiny", [f"publish.method={method}"]).profile.publish)
+        listed = (settings_env / "gallery" / "candidates.html").read_text()
+        assert report.details["method"] == method
+        assert f'href="pairs/{pair}-{method}-{clf}.html"' in listed
+        other = "fit" if method == "classifier" else "classifier"
+        assert f'href="pairs/{pair}-{other}-{clf}.html"' not in listed
