@@ -27,13 +27,13 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
                     ) -> tuple[dict[str, Any], dict[str, float]]:
     """The stage flows `names` in order, recorded as one `pipeline_run`; (results, seconds) per stage.
 
-    `items`: each stage runs on just these of its items (the material-added re-run's pairs; every
-    stage it runs fans out over pairs). `details(stage)`, called after each stage, adds to its
+    `items`: each stage that fans out runs on just these of its items (the material-added re-run's
+    pairs: its stages fan out over pairs); a stage that does not fan out runs whole. `details(stage)`, called after each stage, adds to its
     recorded report (the re-run's changed-parts counts on `fit`).
     """
     from photoshape_flow.flows.events import stage_context
 
-    from photoshape_flow.stages import Blocked, StageReport
+    from photoshape_flow.stages import Blocked, StageReport, get_stage
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
     ctx = stage_context()
@@ -42,7 +42,7 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
     times: dict[str, float] = {}
     try:
         for name in names:
-            limit = {} if items is None else {"items": items}
+            limit = {"items": items} if items is not None and get_stage(name).fans_out else {}
             results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides, **limit)
             counts = {k: int(results[name].get(k) or 0) for k in ("done", "skipped", "failed", "rejected")}
             held = results[name].get("blocked") or 0  # a fan-out's total, or a whole stage's Blocked as JSON
