@@ -28,8 +28,9 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
     """The stage flows `names` in order, recorded as one `pipeline_run`; (results, seconds) per stage.
 
     `items`: each stage that fans out runs on just these of its items (the material-added re-run's
-    pairs: its stages fan out over pairs); a stage that does not fan out runs whole. `details(stage)`, called after each stage, adds to its
-    recorded report (the re-run's changed-parts counts on `fit`).
+    pairs: its stages fan out over pairs); a stage that does not fan out runs whole.
+    `details(stage)`, called after each stage, adds to its recorded report (the re-run's
+    changed-parts counts on `fit`).
     """
     from photoshape_flow.flows.events import stage_context
 
