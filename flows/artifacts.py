@@ -21,21 +21,23 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.progress_sink import progress_line
 
 
-def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None) -> list[dict[str, Any]]:
-    """One row per PhotoShape candidate: pair, shape, exemplar, method, weakest and mean part posterior
-    (the raw score for rows ranked before inference-9, which have none)."""
+def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None,
+                   method: str = "classifier") -> list[dict[str, Any]]:
+    """One row per PhotoShape candidate of `method` (what `publish.method` shows): pair, shape, exemplar,
+    method key, weakest and mean part posterior (the raw score for rows without one: fit's, and
+    rows ranked before inference-9)."""
     query = """
         SELECT pair_id, shape_id, exemplar_id, method_key, COUNT(*) AS parts,
                MIN(COALESCE(posterior, score)) AS weakest_part, AVG(COALESCE(posterior, score)) AS mean_score,
                MIN(hog_distance) AS hog_distance,
                MIN(alignment_iou) AS alignment_iou
         FROM photoshape_candidate
-        WHERE method = 'classifier'
+        WHERE method = :method
         GROUP BY pair_id, shape_id, exemplar_id, method_key
         ORDER BY mean_score DESC, pair_id
     """
     with session_scope(get_settings().resolved_database_url) as session:
-        rows = [dict(r._mapping) for r in session.execute(sa.text(query))]
+        rows = [dict(r._mapping) for r in session.execute(sa.text(query), {"method": method})]
     if since_pair_ids is not None:
         wanted = set(since_pair_ids)
         rows = [r for r in rows if r["pair_id"] in wanted]
@@ -46,15 +48,17 @@ def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None
     return rows[:limit]
 
 
-def publish_candidates_table(key: str = "photoshape-candidates", rows: list[dict[str, Any]] | None = None) -> None:
-    rows = candidate_rows() if rows is None else rows
+def publish_candidates_table(key: str = "photoshape-candidates", rows: list[dict[str, Any]] | None = None,
+                             method: str = "classifier") -> None:
+    rows = candidate_rows(method=method) if rows is None else rows
     if rows:
-        create_table_artifact(table=rows, key=key, description="PhotoShape candidates of the classifier, best first")
+        create_table_artifact(table=rows, key=key, description=f"PhotoShape candidates of {method}, best first")
 
 
 def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, Any] | None = None,
-                    key: str = "photoshape-run-summary") -> None:
-    """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage."""
+                    key: str = "photoshape-run-summary", changes: dict[str, int] | None = None) -> None:
+    """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage, and
+    (`changes`, a `FitChanges` as a dict) how many parts the run's fit changed."""
     from photoshape_flow.pipeline.progress import assumed_profile
     from photoshape_flow.stages import stage_progress
 
@@ -67,6 +71,10 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
         seconds = stage_times.get(p.stage)
         shown = f"{seconds:.1f}" if seconds is not None else ""
         lines.append(f"| {p.stage} | {shown} | {p.unit} | {p.done} | {p.pending} | {p.failed} | {p.rejected} |")
+    if changes:
+        lines += ["", "| fit: parts | candidate set grew | winner changed | won by a new material |",
+                  "|---:|---:|---:|---:|",
+                  f"| {changes['parts']} | {changes['grown']} | {changes['changed']} | {changes['won_by_new']} |"]
     for name, value in (extra or {}).items():
         lines += ["", f"**{name}**: {value}"]
     create_markdown_artifact(markdown="\n".join(lines), key=key, description=title)
@@ -122,8 +130,8 @@ class ArtifactProgress:
             logging.getLogger(__name__).warning("progress artifacts off for this task: %s", exc)
 
 
-def publish_gallery_artifacts(gallery_index: str | None) -> dict[str, str]:
-    """After publish: the contact sheet as an image artifact and a link artifact to the gallery.
+def publish_gallery_artifacts(gallery_index: str | None, method: str | None = None) -> dict[str, str]:
+    """After publish: the contact sheet of `method`'s candidates as an image artifact and a link to the gallery.
 
     The sheet is written next to the gallery (`contact-sheet.png`) and shown in the UI as an inline
     JPEG (a data URL: the Prefect UI cannot load files from the data root). Returns the keys made.
@@ -142,7 +150,7 @@ def publish_gallery_artifacts(gallery_index: str | None) -> dict[str, str]:
         made["gallery"] = str(create_link_artifact(link=index.as_uri(), link_text=f"PhotoShape gallery ({index})",
                                                    key="photoshape-gallery", description="The published gallery"))
         try:
-            sheet = write_contact_sheet(index.parent / "contact-sheet.png")
+            sheet = write_contact_sheet(index.parent / "contact-sheet.png", method)
         except ValueError as exc:  # nothing rendered yet: no sheet to show
             made["contact-sheet"] = f"skipped: {exc}"
             return made

@@ -1,4 +1,5 @@
-"""`photoshape-pipeline` (every stage in order) and `new-materials` (the material-added re-run).
+"""`photoshape-pipeline` (every stage in order: the nightly run) and `new-materials` (the triggered
+material-added re-run: fit then publish of the affected pairs, no retraining; D36).
 
 Both run the registered stage flows one after another (each fans out and claims its own work) and
 record the run and its resolved profile in `pipeline_run`, as `photoshape run` does. Without a
@@ -7,7 +8,7 @@ record the run and its resolved profile in `pipeline_run`, as `photoshape run` d
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from photoshape_flow.flows.artifacts import candidate_rows, publish_candidates_table, publish_summary
@@ -15,18 +16,25 @@ from photoshape_flow.flows.stages import STAGE_FLOWS, ProfileName, effective, ti
 from photoshape_flow.flows.tasks import task_runner
 from prefect import flow, get_run_logger
 
+from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.stages import STAGE_NAMES
 
 StageName = Literal[STAGE_NAMES]  # type: ignore[valid-type]
 
 
-def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], origin: str
+def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], origin: str,
+                    items: list[int] | None = None, details: Callable[[str], dict[str, Any]] | None = None
                     ) -> tuple[dict[str, Any], dict[str, float]]:
-    """The stage flows `names` in order, recorded as one `pipeline_run`; (results, seconds) per stage."""
+    """The stage flows `names` in order, recorded as one `pipeline_run`; (results, seconds) per stage.
+
+    `items`: each stage that fans out runs on just these of its items (the material-added re-run's
+    pairs: its stages fan out over pairs); a stage that does not fan out runs whole.
+    `details(stage)`, called after each stage, adds to its recorded report (the re-run's
+    changed-parts counts on `fit`).
+    """
     from photoshape_flow.flows.events import stage_context
 
-    from photoshape_flow.profiles import resolve_profile
-    from photoshape_flow.stages import Blocked, StageReport
+    from photoshape_flow.stages import Blocked, StageReport, get_stage
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
     ctx = stage_context()
@@ -35,11 +43,15 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
     times: dict[str, float] = {}
     try:
         for name in names:
-            results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides)
+            limit = {"items": items} if items is not None and get_stage(name).fans_out else {}
+            results[name], times[name] = timed(STAGE_FLOWS[name], profile=profile, overrides=overrides, **limit)
             counts = {k: int(results[name].get(k) or 0) for k in ("done", "skipped", "failed", "rejected")}
             held = results[name].get("blocked") or 0  # a fan-out's total, or a whole stage's Blocked as JSON
             blocked = Blocked(int(held["count"] if isinstance(held, dict) else held))
-            record_report(ctx, run_id, StageReport(name, seconds=times[name], blocked=blocked, **counts))
+            extra = details(name) if details is not None else {}
+            results[name].update(extra)
+            record_report(ctx, run_id, StageReport(name, seconds=times[name], blocked=blocked, details=extra,
+                                                   **counts))
             if blocked.count:
                 get_run_logger().warning("%s: %d items held by another live worker", name, blocked.count)
             get_run_logger().info("%s: %d done, %d skipped, %d failed in %.1f s", name, counts["done"],
@@ -56,6 +68,9 @@ def photoshape_pipeline(profile: ProfileName | None = None, stages: list[StageNa
                         overrides: list[str] | None = None) -> dict[str, Any]:
     """Run the stages in canonical order; each resumes from what earlier runs recorded (incremental).
 
+    The nightly deployment: the full chain, so materials added since the last classifier are
+    retrained on (substances, training renders, training, inference) before fit and publish.
+
     `profile` empty: the profile (and overrides) the collection was last run with, `default` at first.
     """
     name, sets = effective(profile, overrides)
@@ -65,36 +80,58 @@ def photoshape_pipeline(profile: ProfileName | None = None, stages: list[StageNa
     return {"seconds": times, "results": results, "profile": name, "overrides": sets}
 
 
-@flow(name="new-materials", task_runner=task_runner())
+@flow(name="new-materials", task_runner=task_runner(), description=(
+    "Materials were added: fit first (minutes), no retraining. `fit` re-ranks the parts whose candidate set "
+    "the new materials join, `publish` re-renders those pairs with publish.method, the gallery is rewritten; "
+    "the summary says how many parts changed. Retraining waits for the nightly run."))
 def new_materials(profile: ProfileName | None = None, renders_per_material: int = 40,
                   overrides: list[str] | None = None) -> dict[str, Any]:
-    """Materials were added: re-run every stage downstream of the material table, through publish.
+    """Materials were added: the triggered chain of `pipeline.new_materials` (D36), fit then publish.
 
     The new materials are found by querying the database (what the newest classifier does not know),
-    not from the triggering event, so one debounced run covers a whole bulk import. Training and
-    bootstrap renders grow by `renders_per_material` per new material; publish re-renders the pairs
-    whose assignment set changed, and the gallery is rewritten.
+    not from the triggering event, so one debounced run covers a whole bulk import. `fit` runs on the
+    pairs whose candidate set they join, so a new material can win a part without a retrain; publish
+    re-renders those of them whose assignment set (of `publish.method`) changed, and the gallery is
+    rewritten. Training and bootstrap renders grow by `renders_per_material` per new material in the
+    recorded overrides, which the nightly run (the full chain: retrain, then fit, then publish) uses.
     """
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
+    from photoshape_flow.pipeline.fit_changes import fit_changes, fit_snapshot
     from photoshape_flow.pipeline.new_materials import plan_material_rerun
+    from photoshape_flow.stages.rerun import ORIGIN
 
+    url = get_settings().resolved_database_url
     name, sets = effective(profile, overrides)
-    with session_scope(get_settings().resolved_database_url) as session:
+    with session_scope(url) as session:
         rerun = plan_material_rerun(session, name, sets, renders_per_material)
+        before = fit_snapshot(session, rerun.fit_key, rerun.pairs)
     summary: dict[str, Any] = {"new_materials": rerun.new_ids, "previous_classifier_id": rerun.previous_classifier_id,
-                               "profile": rerun.profile, "overrides": rerun.overrides, "stages": rerun.stages}
+                               "profile": rerun.profile, "overrides": rerun.overrides, "stages": rerun.stages,
+                               "pairs": len(rerun.pairs), "fit": rerun.fit_key}
     if not rerun.new_ids:
         get_run_logger().info("new materials: none since classifier %s", rerun.previous_classifier_id)
         return {**summary, "classifier_id": rerun.previous_classifier_id}
-    get_run_logger().info("new materials %s: re-running %s with profile %s %s", rerun.new_ids,
-                          ", ".join(rerun.stages), rerun.profile, rerun.overrides)
-    results, times = run_stage_flows(rerun.profile, rerun.overrides, rerun.stages, origin="new-materials")
-    classifier_id = (results.get("training") or {}).get("details", {}).get("classifier_id")
-    summary.update(classifier_id=classifier_id, results=results, seconds=times)
-    rows = [r for r in candidate_rows() if r["method_key"] == f"classifier:{classifier_id}"]
-    publish_candidates_table("new-material-candidates", rows)
-    publish_summary("new materials re-run", times,
-                    {"new materials": rerun.new_ids, "classifier": classifier_id, "profile": rerun.profile,
-                     "overrides": rerun.overrides}, key="new-materials-summary")
+    get_run_logger().info("new materials %s: %s on %d pairs (no retraining) with profile %s %s", rerun.new_ids,
+                          " -> ".join(rerun.stages), len(rerun.pairs), rerun.profile, rerun.overrides)
+
+    def changes(stage: str) -> dict[str, Any]:
+        if stage != "fit":
+            return {}
+        with session_scope(url) as session:
+            after = fit_snapshot(session, rerun.fit_key, rerun.pairs)
+        return {"changes": fit_changes(before, after, rerun.new_ids).as_dict()}
+
+    results, times = run_stage_flows(rerun.profile, rerun.overrides, rerun.stages, origin=ORIGIN,
+                                     items=rerun.pairs, details=changes)
+    changed = (results.get("fit") or {}).get("changes", {})
+    summary.update(classifier_id=rerun.previous_classifier_id, results=results, seconds=times, changes=changed)
+    method = resolve_profile(rerun.profile, rerun.overrides).profile.publish.method
+    wanted = set(rerun.pairs)
+    rows = [r for r in candidate_rows(method=method) if r["pair_id"] in wanted]
+    publish_candidates_table("new-material-candidates", rows, method=method)
+    publish_summary("new materials re-run (fit first, no retraining)", times,
+                    {"new materials": rerun.new_ids, "classifier (not retrained)": rerun.previous_classifier_id,
+                     "pairs re-fitted": len(rerun.pairs), "published with": method, "profile": rerun.profile,
+                     "overrides": rerun.overrides}, key="new-materials-summary", changes=changed)
     return summary

@@ -36,9 +36,14 @@ def effective(profile: str | None, overrides: list[str] | None) -> tuple[str, li
         return effective_profile(session, profile, overrides or [])
 
 
-def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> dict[str, Any]:
-    """Map `process_batch` over the stage's units, tracking progress in an artifact, then finish."""
+def fan_out(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None,
+            items: list[int] | None = None) -> dict[str, Any]:
+    """Map `process_batch` over the stage's units (only `items` of them, when given), tracking progress
+    in an artifact, then finish."""
     units = plan_batches(stage, profile, overrides, batch_size)
+    if items is not None:  # the material-added re-run: the affected pairs only
+        wanted = set(items)
+        units = [u for u in ({**u, "ids": [i for i in u["ids"] if i in wanted]} for u in units) if u["ids"]]
     totals: dict[str, Any] = {"batches": len(units), "items": 0, "done": 0, "skipped": 0, "failed": 0, "rejected": 0,
                               "blocked": 0}
     if units:
@@ -64,11 +69,13 @@ def _stage_flow(stage: Stage) -> Flow:
 
     if stage.fans_out:
         def body(profile: ProfileName | None = None, overrides: list[str] | None = None,
-                 batch_size: int = stage.batch_size) -> dict[str, Any]:
-            result = fan_out(name, *effective(profile, overrides), batch_size)
+                 batch_size: int = stage.batch_size, items: list[int] | None = None) -> dict[str, Any]:
+            """`items`: only these of the stage's planned items (None: all of them)."""
+            result = fan_out(name, *effective(profile, overrides), batch_size, items)
             if name == "publish":  # what the UI shows of a publish: the candidates, the sheet, the gallery
-                publish_candidates_table()
-                publish_gallery_artifacts((result.get("finish") or {}).get("gallery"))
+                finished = result.get("finish") or {}
+                publish_candidates_table(method=finished.get("method") or "classifier")
+                publish_gallery_artifacts(finished.get("gallery"), finished.get("method"))
             return result
     else:
         def body(profile: ProfileName | None = None, overrides: list[str] | None = None  # type: ignore[misc]

@@ -114,17 +114,29 @@ class FitConfig:
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
 
 
+PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)
+
+
 @dataclass(frozen=True)
 class PublishConfig:
-    """Which pairs become PhotoShapes and at what quality they are rendered and exported."""
+    """Which pairs become PhotoShapes, whose assignments they show, at what quality they are rendered.
+
+    `method` names whose rank-1 assignments publish renders, exports and lists in the gallery: the
+    paper's classifier ranking (each pair's newest classifier) until `fit` beats it on the second
+    world, when switching is this one field (docs/decisions.md D36). The CLI and the flows both read it.
+    """
 
     max_rank: int = 12  # publish pairs up to this rank per shape
+    method: str = "classifier"  # one of PUBLISH_METHODS
     views: int = 8
     size: int = 256
     spp: int = 64
     formats: tuple[str, ...] = DEFAULT_FORMATS
 
     def __post_init__(self) -> None:
+        if self.method not in PUBLISH_METHODS:
+            raise ProfileError(f"publish.method: unknown method {self.method!r}; "
+                               f"choose from {', '.join(PUBLISH_METHODS)}")
         unknown = [f for f in self.formats if f not in EXPORTERS]
         if unknown:
             raise ProfileError(f"publish.formats: unknown format {unknown[0]!r}; choose from {', '.join(EXPORTERS)}")

@@ -1,5 +1,8 @@
 """The material-added chain as a user meets it: a real Prefect server, `photoshape serve`, a material
-ingested with the CLI, the automation's run, and the gallery afterwards."""
+ingested with the CLI, the automation's run (fit first, no retraining), and the gallery afterwards.
+
+The collection is built with `publish.method=fit` as a recorded override (the profile the re-run
+inherits), so what the re-run fits is what the gallery shows without waiting for a retrain."""
 
 from __future__ import annotations
 
@@ -88,7 +91,8 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1"}
     env.pop("PHOTOSHAPE_DATABASE_URL", None)
     subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=env, check=True, capture_output=True)
-    built = subprocess.run([PHOTOSHAPE, "run", "all", "--profile", "tiny"], env=env, capture_output=True, text=True)
+    built = subprocess.run([PHOTOSHAPE, "run", "all", "--profile", "tiny", "--set", "publish.method=fit"], env=env,
+                           capture_output=True, text=True)
     assert built.returncode == 0, built.stdout[-3000:] + built.stderr[-3000:]
 
     serve = subprocess.Popen([PHOTOSHAPE, "serve", "--declarations", str(_quick_trigger(tmp_path))], env=env,
@@ -125,7 +129,8 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     assert (data_root / "gallery" / "index.html").as_uri() in str(by_key["photoshape-gallery"].data)
     assert {"new-materials-summary", "publish-progress"} <= set(by_key)
     summary = str(by_key["new-materials-summary"].data)
-    assert re.search(r"\| training \| \d+\.\d \|", summary) and re.search(r"\| publish \| \d+\.\d \|", summary), summary
+    assert re.search(r"\| fit \| \d+\.\d \|", summary) and re.search(r"\| publish \| \d+\.\d \|", summary), summary
+    assert re.search(r"\| fit: parts \| candidate set grew \| winner changed \| won by a new material \|", summary)
 
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import models as m
@@ -137,22 +142,28 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     url = f"sqlite:///{data_root / 'photoshape.db'}"
     with session_scope(url) as session:
         run = session.execute(sa.select(m.PipelineRun).where(m.PipelineRun.origin == "new-materials")).scalar_one()
-        new = session.execute(sa.select(m.Classifier).where(m.Classifier.kind == "material")
-                              .order_by(m.Classifier.id.desc()).limit(1)).scalar_one()
+        (classifier,) = session.execute(sa.select(m.Classifier).where(m.Classifier.kind == "material")).scalars()
         new_ids = session.execute(sa.select(m.Material.id).where(m.Material.name.like("new_%"))).scalars().all()
-        method_key = f"classifier:{new.id}"
+        method_key = f"fit:{classifier.id}"
+        competing = set(session.execute(sa.select(m.Assignment.material_id).where(
+            m.Assignment.method_key == method_key, m.Assignment.material_id.in_(new_ids))).scalars())
         published = session.execute(
             sa.select(m.Rendering.pair_id, m.Rendering.params).where(
                 m.Rendering.kind == "photoshape", m.Rendering.status == "ok",
                 m.Rendering.key.like(f"%/{method_key}/exemplar"))
         ).all()
         keys = assignment_set_keys(session, [(pair_id, method_key) for pair_id, _ in published])
-    # the run used the profile the collection was built with, not a fixed preset, and went through publish
+    # the run used the profile the collection was built with, not a fixed preset, fitted and published
     assert (run.profile_name, run.status) == ("tiny", "ok"), run.error
-    assert run.stages[-1] == "publish" and run.reports["publish"]["done"] > 0
+    assert run.overrides["publish.method"] == "fit"
+    assert run.stages == ["fit", "publish"] and run.reports["fit"]["done"] > 0  # no retraining stage ran
+    changes = run.reports["fit"]["details"]["changes"]
+    assert changes["grown"] > 0 and changes["won_by_new"] <= changes["parts"], changes
+    # the nightly run retrains with the new materials: the raised render counts are recorded for it
     assert {"training_renders.count", "substances.bootstrap_count"} <= set(run.overrides)
-    assert len(new_ids) == 2 and set(new_ids) <= set(new.materials) and new.parent_id is not None
-    assert published, "the new classifier's PhotoShapes were not rendered"
+    assert len(new_ids) == 2 and not set(new_ids) & set(classifier.materials)  # one classifier, not retrained
+    assert competing == set(new_ids)  # fit ranked both new materials without a retrain
+    assert published, "fit's PhotoShapes were not rendered"
     for pair_id, params in published:  # each affected pair's gallery page shows the re-run's assignment set
         assert params["assignment_set"] == keys[(pair_id, method_key)]
         page = (data_root / "gallery" / "pairs" / f"{pair_id}-{method_key.replace(':', '-')}.html").read_text()

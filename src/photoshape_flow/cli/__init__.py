@@ -21,7 +21,7 @@ app = typer.Typer(
 
 # Order is the order of `photoshape --help`.
 VERB_MODULES: tuple[str, ...] = (
-    "demo", "ingest", "run", "status", "claims", "eval", "export", "gallery", "retrieve", "grade",
+    "demo", "ingest", "run", "new_materials", "status", "claims", "eval", "export", "gallery", "retrieve", "grade",
     "serve", "db", "doctor", "gc",
 )
 

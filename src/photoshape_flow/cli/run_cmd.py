@@ -126,7 +126,7 @@ def publish_pairs(resolved: Any, ctx: Any, pairs: Sequence[int]) -> StageReport:
 
     wanted = sorted(set(pairs))
     with ctx.session() as session:
-        found = {pair_id for pair_id, _ in candidate_method_keys(session, None, wanted)}
+        found = {pair_id for pair_id, _ in candidate_method_keys(session, resolved.profile.publish.method, wanted)}
     for pair_id in wanted:
         if pair_id not in found:
             console.print(f"[yellow]pair {pair_id}: not a PhotoShape candidate (unknown, excluded, or no rank-1 "

@@ -30,15 +30,16 @@ def plan(ctx: StageContext, cfg: PublishConfig) -> list[WorkUnit]:
 
 
 def versions(ctx: StageContext, cfg: PublishConfig, unit: WorkUnit) -> dict[int, str]:
-    """Each pair's rank-1 assignment-set key of the method it is published with (its newest classifier).
+    """Each pair's rank-1 assignment-set key of the method it is published with (`publish.method`: the
+    pair's newest `classifier:<id>` or `fit:<id>` rows).
 
-    A new classifier's (or a re-ranked) assignment changes the key, so the pair is claimed and
-    rendered again, by `photoshape run publish` and the Prefect deployment alike.
+    A new classifier's, a re-ranked or a re-fitted assignment changes the key, so the pair is claimed
+    and rendered again, by `photoshape run publish` and the Prefect deployment alike.
     """
     from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
 
     with ctx.session() as session:
-        shown = candidate_method_keys(session, None, unit.ids)
+        shown = candidate_method_keys(session, cfg.method, unit.ids)
         keys = assignment_set_keys(session, shown)
     return {pair_id: keys[(pair_id, method_key)] for pair_id, method_key in shown if (pair_id, method_key) in keys}
 
@@ -47,7 +48,7 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
     from photoshape_flow.pipeline.publish import run_publish
 
     ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
-    summary = run_publish(ids, None, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
+    summary = run_publish(ids, cfg.method, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
                           formats=cfg.formats, progress=ctx.progress)
     report = StageReport(NAME, done=summary.rendered, skipped=summary.skipped, failed=summary.failed,
                          details={"publish": summary.as_dict()})
@@ -57,9 +58,9 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
 
 def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
-    """The gallery site over everything published so far."""
+    """The gallery site over everything published so far with `publish.method`."""
     from photoshape_flow.pipeline.gallery_site import write_gallery_site
 
-    site = write_gallery_site(gallery_dir(ctx), None, ctx.settings, progress=ctx.progress)
+    site = write_gallery_site(gallery_dir(ctx), cfg.method, ctx.settings, progress=ctx.progress)
     return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
-                                      "gallery_waiting": site.waiting})
+                                      "gallery_waiting": site.waiting, "method": cfg.method})

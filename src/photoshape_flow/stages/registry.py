@@ -51,6 +51,9 @@ class Stage:
     batch_size: int = 32  # items per unit of work in a fan-out
     claims_itself: bool = False  # the pipeline claims its items (finer than a batch)
     exclusive: bool = False  # whole-stage work that must not run twice at once (one flow run at a time)
+    # part of retraining: makes a network's training data, trains it, or applies the retrained network
+    # (hours at paper scale); a triggered re-run leaves it to the nightly run (`pipeline.new_materials`)
+    retraining: bool = False
 
     @property
     def fans_out(self) -> bool:
@@ -88,22 +91,24 @@ REGISTRY: tuple[Stage, ...] = (
         substances.run, reads=("alignment", "material", "envmap", "shape"),
         writes=("rendering", "classifier", "part_substance"), progress=progress.substances_progress,
         plan=substances.plan, finish=substances.finish, batch_size=16, versions=substances.versions, exclusive=True,
+        retraining=True,
     ),
     Stage(
         "training-renders", "Randomized renders conditioned on part substances (section 5.1), resumable.",
         training_renders.run, reads=("part_substance", "material", "envmap", "shape"), writes=("rendering",),
         progress=progress.training_renders_progress, plan=training_renders.plan, batch_size=16,
-        versions=training_renders.versions,
+        versions=training_renders.versions, retraining=True,
     ),
     Stage(
         "training", "Train (or resume, or fine-tune when materials were added) the material classifier.",
         training.run, reads=("rendering", "material"), writes=("classifier",), progress=progress.training_progress,
-        exclusive=True,
+        exclusive=True, retraining=True,
     ),
     Stage(
         "inference", "Ranked materials per part for the classifier and the baselines (section 6.1).",
         inference.run, reads=("alignment", "part_substance", "classifier", "material"), writes=("assignment",),
         progress=progress.inference_progress, plan=inference.plan, batch_size=64, claims_itself=True,
+        retraining=True,
     ),
     Stage(
         "fit", "Materials chosen by rendering each pair against its photo (lighting, candidates, scores).",

@@ -12,6 +12,7 @@ correctness of the stored results.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, is_dataclass
 
 from photoshape_flow.hashing import stable_hash
@@ -23,6 +24,11 @@ class WorkUnit:
 
     part: str
     ids: tuple[int, ...]
+
+    def only(self, ids: Iterable[int]) -> WorkUnit:
+        """This unit with just those of its items that are in `ids` (a re-run of the affected items)."""
+        wanted = set(ids)
+        return WorkUnit(self.part, tuple(i for i in self.ids if i in wanted))
 
     def batches(self, size: int) -> list[WorkUnit]:
         size = max(size, 1)
