@@ -116,7 +116,7 @@ class FitConfig:
     refine: bool = True
     refine_max_rank: int = 12  # pairs up to this rank per shape (keep equal to publish.max_rank) and each
     #                            exemplar's best pair are refined; the others keep the selection
-    refine_iterations: int = 24  # Adam steps on the tint and roughness scale
+    refine_iterations: int = 8  # Adam steps (after a closed-form warm start) on the tint and roughness scale
     refine_spp: int = 4  # per gradient render (a new seed each step)
     refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
 
@@ -173,7 +173,7 @@ PROFILES: dict[str, Profile] = {
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
         training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
-        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=12,
+        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=6,
                       refine_size=48),
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
     ),

@@ -5,8 +5,9 @@ glossier or more finely patterned than the nearest one. So each refined part kee
 material and fits four numbers (a `render.specs.Refinement`), never texels:
 
 - **UV scale and rotation** by a small search of forward renders (`uv_search`): Mitsuba's UV
-  transform has no gradients, and the loss is periodic in both. Every grid point is one render with
-  every textured part at that point; each part keeps its own best, compared with the photo by
+  transform has no gradients, and the loss is periodic in both. A coordinate search: every scale
+  unrotated, then every rotation at each part's best scale (5 + 3 renders for the default grid, not
+  5 x 4), each render with every textured part at its point; each part keeps its own best, compared with the photo by
   texture statistics that tolerate misalignment (the fit's gradient and contrast terms plus the
   structure-tensor orientation, which the gradient magnitude cannot see). Identity wins ties
   within `uv_margin`, so an untextured or isotropic material is not rotated at random.
@@ -16,8 +17,10 @@ material and fits four numbers (a `render.specs.Refinement`), never texels:
   of the mean linear colour after the stage's exposure against the photo region's mean, plus
   `std_weight` x the same for the per-channel standard deviation (the light structural term:
   highlights and texture contrast, which roughness moves). Region statistics, not pixels, for the
-  reason of docs/decisions.md D32: alignment is off by a few pixels. A new seed every iteration,
-  low spp: Adam averages the noise.
+  reason of docs/decisions.md D32: alignment is off by a few pixels. The tint starts where the
+  first render's region means say it should if radiance were linear in the albedo (`warm_start`),
+  so a few Adam steps suffice (they correct interreflections, clipping and the std term); a new
+  seed every step, low spp: Adam averages the noise.
 
 All parts are refined in the same renders. `refine_parts` returns, per part, the refinement and the
 loss before and after (both at seed 0, so the noise is the same).
@@ -45,9 +48,9 @@ TEXTURED = ("albedo", "roughness", "normal")  # maps whose placement the UV tran
 class RefineSettings:
     """How hard to refine (the `FitConfig` refine fields)."""
 
-    iterations: int = 24
+    iterations: int = 8
     spp: int = 4
-    learning_rate: float = 0.08
+    learning_rate: float = 0.1
     tint_range: tuple[float, float] = (0.5, 2.0)
     roughness_range: tuple[float, float] = (0.5, 2.0)
     std_weight: float = 0.25
@@ -121,6 +124,16 @@ def choose_uv(costs: Mapping[tuple[float, float], float], margin: float) -> tupl
     return best
 
 
+def warm_start(target: np.ndarray, rendered: np.ndarray, exposure: float,
+               bounds: tuple[float, float]) -> list[float]:
+    """Log tint that makes a region's exposed mean colour the photo's if radiance were linear in the
+    albedo (one bounce): log(target / (exposure * rendered)), clamped. Adam starts here and corrects
+    what the assumption misses (interreflections, clipped texels, the std term)."""
+    ratio = np.asarray(target, np.float64) / np.maximum(exposure * np.asarray(rendered, np.float64), 1e-6)
+    low, high = log_range(bounds)
+    return [float(np.clip(math.log(max(r, 1e-6)), low, high)) for r in ratio]
+
+
 def log_range(bounds: tuple[float, float]) -> tuple[float, float]:
     """A multiplier's range in log space, where Adam steps it (equal steps up and down)."""
     return math.log(bounds[0]), math.log(bounds[1])
@@ -139,8 +152,8 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
               exposure: float, settings: RefineSettings) -> dict[int, tuple[tuple[float, float], dict[str, float]]]:
     """Per textured part of `parts`: ((scale, rotation radians), {"identity": cost, "chosen": cost}).
 
-    `scene` is the pair's `fit.scene.FitScene` (its photo and regions) at `frame`'s size; one render
-    per grid point, with every textured part at that point.
+    `scene` is the pair's `fit.scene.FitScene` (its photo and regions) at `frame`'s size (see the
+    module docstring for the search).
     """
     positions = {p.index: k for k, p in enumerate(scene.mesh.parts)}
     textured = [i for i in parts if i in positions and is_textured(materials[positions[i]])
@@ -153,21 +166,27 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
     photo_orientation = {i: orientation(photo_lab, scene.masks[i]) for i in textured}
     weights = Weights(color=0.0, contrast=0.5, gradient=1.0)
     costs: dict[int, dict[tuple[float, float], float]] = {i: {} for i in textured}
+
+    def measure(points: Mapping[int, tuple[float, float]]) -> None:
+        """One render with part i at points[i]; each part's cost at its point."""
+        trial = list(materials)
+        for i, (scale, rotation) in points.items():
+            trial[positions[i]] = with_refinement(materials[positions[i]], Refinement(uv_scale=scale,
+                                                                                      uv_rotation=rotation))
+        lab = to_lab(lt.exposed_srgb(scene.render(frame, trial, envmap), exposure))
+        for i, point in points.items():
+            rendered = appearance(lab, regions[i])
+            if rendered is not None:
+                costs[i][point] = distance(rendered, scene.photo_stats[i], weights) + settings.orientation_weight * (
+                    float(np.linalg.norm(orientation(lab, regions[i]) - photo_orientation[i])))
+
+    # coordinate search: every scale unrotated, then every rotation at each part's best scale
     for scale in settings.uv_scales:
-        for degrees in settings.uv_rotations:
-            point = (float(scale), math.radians(degrees))
-            trial = list(materials)
-            for i in textured:
-                trial[positions[i]] = with_refinement(materials[positions[i]], Refinement(uv_scale=point[0],
-                                                                                          uv_rotation=point[1]))
-            lab = to_lab(lt.exposed_srgb(scene.render(frame, trial, envmap), exposure))
-            for i in textured:
-                rendered = appearance(lab, regions[i])
-                if rendered is None:
-                    continue
-                cost = distance(rendered, scene.photo_stats[i], weights) + settings.orientation_weight * float(
-                    np.linalg.norm(orientation(lab, regions[i]) - photo_orientation[i]))
-                costs[i][point] = cost
+        measure({i: (float(scale), 0.0) for i in textured})
+    best_scale = {i: min(by_point, key=lambda k: by_point[k])[0] for i, by_point in costs.items() if by_point}
+    for degrees in settings.uv_rotations:
+        if degrees % 360:
+            measure({i: (best_scale[i], math.radians(degrees)) for i in best_scale})
     out = {}
     for i, by_point in costs.items():
         if by_point:
@@ -176,39 +195,62 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
     return out
 
 
-def _statistics(dr: Any, mi: Any, image: Any, weights: Any) -> tuple[list[Any], list[Any]]:
-    """Per-channel weighted mean and std of an (H, W, 4) TensorXf, as Dr.Jit Floats (differentiable)."""
-    flat = image.array
-    pixels = dr.width(weights)
-    index = dr.arange(mi.UInt32, pixels) * 4
-    means, stds = [], []
-    for channel in range(3):
-        values = dr.gather(mi.Float, flat, index + channel)
-        mean = dr.sum(values * weights)
-        second = dr.sum(values * values * weights)
-        means.append(mean)
-        stds.append(dr.sqrt(dr.maximum(second - mean * mean, 1e-10)))
-    return means, stds
+class RegionLoss:
+    """`region_loss` of every refined part on a Dr.Jit render, weighted by pixel share (differentiable).
 
+    One scatter-add per statistic (sums of each channel and of its square over every part's pixels)
+    rather than a masked reduction per part and channel: a few kernels per step whatever the part
+    count. `labels` (H, W): the part's position in `parts` for its region's pixels, -1 elsewhere.
+    """
 
-def _loss(dr: Any, mi: Any, image: Any, weights: Mapping[int, Any],
-          targets: Mapping[int, tuple[np.ndarray, np.ndarray]], shares: Mapping[int, float], exposure: float,
-          std_weight: float) -> tuple[Any, dict[int, float]]:
-    """(total loss, per-part loss) of a render: `region_loss` of every part, weighted by pixel share."""
-    total = mi.Float(0.0)
-    per_part = {}
-    for index, w in weights.items():
-        means, stds = _statistics(dr, mi, image, w)
-        t_mean, t_std = targets[index]
-        level = t_mean + 0.02
-        part = mi.Float(0.0)
+    def __init__(self, mi: Any, labels: np.ndarray, parts: Sequence[int],
+                 targets: Mapping[int, tuple[np.ndarray, np.ndarray]], exposure: float, std_weight: float):
+        import drjit as dr
+
+        self.mi, self.dr = mi, dr
+        self.parts = list(parts)
+        flat = np.asarray(labels, np.int64).ravel()
+        inside = flat >= 0
+        self.pixels = mi.UInt32(np.flatnonzero(inside).astype(np.uint32))
+        self.labels = mi.UInt32(flat[inside].astype(np.uint32))
+        counts = np.bincount(flat[inside], minlength=len(self.parts)).astype(np.float64)
+        self.counts = mi.Float(np.maximum(counts, 1.0).astype(np.float32))
+        self.shares = mi.Float((counts / max(counts.sum(), 1.0)).astype(np.float32))
+        self.exposure = float(exposure)
+        self.std_weight = float(std_weight)
+        mean = np.array([targets[i][0] for i in self.parts], np.float64)
+        std = np.array([targets[i][1] for i in self.parts], np.float64)
+        level = mean + 0.02
+        self.t_mean = [mi.Float(mean[:, c].astype(np.float32)) for c in range(3)]
+        self.t_std = [mi.Float(std[:, c].astype(np.float32)) for c in range(3)]
+        self.level = [mi.Float(level[:, c].astype(np.float32)) for c in range(3)]
+
+    def __call__(self, image: Any) -> tuple[Any, Any]:
+        """(total, per-part loss as a Float array in `parts` order) of an (H, W, 4) TensorXf render."""
+        mi, dr = self.mi, self.dr
+        size = len(self.parts)
+        per_part = dr.zeros(mi.Float, size)
         for c in range(3):
-            part += dr.square((exposure * means[c] - float(t_mean[c])) / float(level[c])) / 3.0
-            part += std_weight * dr.square((exposure * stds[c] - float(t_std[c])) / float(level[c])) / 3.0
-        total += shares[index] * part
-        per_part[index] = part
-    dr.eval(total)
-    return total, {i: float(v.array[0] if hasattr(v, "array") else v[0]) for i, v in per_part.items()}
+            values = dr.gather(mi.Float, image.array, self.pixels * 4 + c)
+            sums, squares = dr.zeros(mi.Float, size), dr.zeros(mi.Float, size)
+            dr.scatter_add(sums, values, self.labels)
+            dr.scatter_add(squares, values * values, self.labels)
+            mean = sums / self.counts
+            std = dr.sqrt(dr.maximum(squares / self.counts - mean * mean, 1e-10))
+            per_part += dr.square((self.exposure * mean - self.t_mean[c]) / self.level[c]) / 3.0
+            per_part += self.std_weight * dr.square((self.exposure * std - self.t_std[c]) / self.level[c]) / 3.0
+        return dr.sum(per_part * self.shares), per_part
+
+    def means(self, image: Any) -> np.ndarray:
+        """(parts, 3) mean linear colour of each part's region in a render (NumPy, no gradients)."""
+        flat = np.array(image, np.float64).reshape(-1, 4)[:, :3]
+        pixels, labels = np.array(self.pixels, np.int64), np.array(self.labels, np.int64)
+        sums = np.zeros((len(self.parts), 3))
+        np.add.at(sums, labels, flat[pixels])
+        return sums / np.array(self.counts, np.float64)[:, None]
+
+    def values(self, per_part: Any) -> dict[int, float]:
+        return {i: float(v) for i, v in zip(self.parts, np.array(per_part, np.float64).reshape(-1), strict=True)}
 
 
 def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[int], envmap: Any,
@@ -238,11 +280,12 @@ def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequen
     parts = [i for i in parts if regions[i].sum() >= 4 and i in targets]
     if not parts:
         return {}
+    labels = np.full(ids.shape, -1, np.int64)
+    for k, i in enumerate(parts):
+        labels[regions[i]] = k
     with frame.gradient_scene(mesh, placed, scene.camera, envmap, settings.max_depth) as g:
         mi = g.mi
-        total_pixels = sum(float(regions[i].sum()) for i in parts)
-        weights = {i: mi.Float((regions[i].ravel() / regions[i].sum()).astype(np.float32)) for i in parts}
-        shares = {i: float(regions[i].sum()) / total_pixels for i in parts}
+        loss = RegionLoss(mi, labels, parts, targets, exposure, settings.std_weight)
         opt = mi.ad.Adam(lr=settings.learning_rate)
         for i in parts:
             opt[f"tint_{i}"] = mi.Color3f(0.0)
@@ -253,19 +296,20 @@ def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequen
             rough = {positions[i]: dr.exp(opt[f"rough_{i}"]) for i in parts}
             return g.render(tints, rough, settings.spp, seed)
 
-        before: dict[int, float] = {}
-        for iteration in range(max(1, settings.iterations)):
-            total, per_part = _loss(dr, mi, render(iteration), weights, targets, shares, exposure,
-                                    settings.std_weight)
-            if iteration == 0:
-                before = per_part
+        with dr.suspend_grad():  # the loss before, and the warm start
+            image = render(0)
+            before = loss.values(loss(image)[1])
+            for i, mean in zip(parts, loss.means(image), strict=True):
+                opt[f"tint_{i}"] = mi.Color3f(*warm_start(targets[i][0], mean, exposure, settings.tint_range))
+        for iteration in range(1, max(1, settings.iterations) + 1):
+            total, _ = loss(render(iteration))
             dr.backward(total)
             opt.step()
             for i in parts:
                 opt[f"tint_{i}"] = dr.clip(opt[f"tint_{i}"], *log_range(settings.tint_range))
                 opt[f"rough_{i}"] = dr.clip(opt[f"rough_{i}"], *log_range(settings.roughness_range))
         with dr.suspend_grad():
-            _, after = _loss(dr, mi, render(0), weights, targets, shares, exposure, settings.std_weight)
+            after = loss.values(loss(render(0))[1])
         out = {}
         for i in parts:
             tint = tuple(round(float(math.exp(t)), 6) for t in np.array(opt[f"tint_{i}"], np.float64).reshape(-1)[:3])
