@@ -46,7 +46,7 @@ def _bench_render() -> object:
     return module
 
 
-def probe(pairs: int) -> dict:
+def probe(pairs: int, roughness_prior: float | None = None) -> dict:
     from dataclasses import replace
 
     import numpy as np
@@ -80,6 +80,8 @@ def probe(pairs: int) -> dict:
                                         foreground=ids > 0)
             photo_s = time.perf_counter() - photo_started
             settings = RefineSettings(iterations=cfg.refine_iterations, spp=cfg.refine_spp, erode=cfg.erode)
+            if roughness_prior is not None:
+                settings = replace(settings, roughness_prior=roughness_prior)
             started = time.perf_counter()
             result = refine_parts(FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp), scene, materials,
                                   sorted(scene.masks), envmap, exposure, settings,
@@ -104,12 +106,13 @@ def probe(pairs: int) -> dict:
     return out
 
 
-def run_probe(pairs: int, empty_cache: bool) -> dict:
+def run_probe(pairs: int, empty_cache: bool, roughness_prior: float | None = None) -> dict:
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as cache:
         if empty_cache:
             env["DRJIT_CACHE_DIR"] = cache
-        proc = subprocess.run([sys.executable, __file__, "--probe", "--pairs", str(pairs)], env=env,
+        extra = [] if roughness_prior is None else ["--roughness-prior", str(roughness_prior)]
+        proc = subprocess.run([sys.executable, __file__, "--probe", "--pairs", str(pairs), *extra], env=env,
                               capture_output=True, text=True, check=True, timeout=1800)
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -118,14 +121,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--pairs", type=int, default=4)
     parser.add_argument("--empty-cache", action="store_true", help="also run with an empty Dr.Jit kernel cache")
+    parser.add_argument("--roughness-prior", type=float, default=None, help="override RefineSettings.roughness_prior")
     parser.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.probe:
-        print(json.dumps(probe(args.pairs)))
+        print(json.dumps(probe(args.pairs, args.roughness_prior)))
         return
-    runs = {"warm kernel cache": run_probe(args.pairs, False)}
+    runs = {"warm kernel cache": run_probe(args.pairs, False, args.roughness_prior)}
     if args.empty_cache:
-        runs["empty kernel cache"] = run_probe(args.pairs, True)
+        runs["empty kernel cache"] = run_probe(args.pairs, True, args.roughness_prior)
     record = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": platform.platform(),
               "cpus": os.cpu_count(), "load_average": os.getloadavg(), "runs": runs}
     RESULTS.mkdir(exist_ok=True)

@@ -54,6 +54,7 @@ class RefineSettings:
     tint_range: tuple[float, float] = (0.5, 2.0)
     roughness_range: tuple[float, float] = (0.5, 2.0)
     std_weight: float = 0.25
+    roughness_prior: float = 0.0  # x sum of squared log roughness scales: stay at 1 without support
     uv_scales: tuple[float, ...] = (0.5, 0.7, 1.0, 1.4, 2.0)
     uv_rotations: tuple[float, ...] = (0.0, 45.0, 90.0, 135.0)  # degrees
     uv_margin: float = 0.03  # a UV hypothesis must beat identity by this fraction of its cost
@@ -303,6 +304,8 @@ def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequen
                 opt[f"tint_{i}"] = mi.Color3f(*warm_start(targets[i][0], mean, exposure, settings.tint_range))
         for iteration in range(1, max(1, settings.iterations) + 1):
             total, _ = loss(render(iteration))
+            for i in parts:
+                total += settings.roughness_prior * dr.square(opt[f"rough_{i}"])
             dr.backward(total)
             opt.step()
             for i in parts:
