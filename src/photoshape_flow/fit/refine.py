@@ -23,7 +23,8 @@ material and fits four numbers (a `render.specs.Refinement`), never texels:
   seed every step, low spp: Adam averages the noise.
 
 All parts are refined in the same renders. `refine_parts` returns, per part, the refinement and the
-loss before and after (both at seed 0, so the noise is the same).
+gradient loss before and after (both at seed 0, so the noise is the same; "before" already has the
+searched UV placement, whose own gain is in ``uv_cost``: identity's and the chosen point's).
 """
 
 from __future__ import annotations
