@@ -46,7 +46,11 @@ def _bench_render() -> object:
     return module
 
 
-def probe(pairs: int, roughness_prior: float | None = None) -> dict:
+def overrides(items: list[str]) -> dict[str, float]:
+    return {name: float(value) for name, value in (item.split("=", 1) for item in items)}
+
+
+def probe(pairs: int, settings_overrides: dict[str, float] | None = None) -> dict:
     from dataclasses import replace
 
     import numpy as np
@@ -80,8 +84,7 @@ def probe(pairs: int, roughness_prior: float | None = None) -> dict:
                                         foreground=ids > 0)
             photo_s = time.perf_counter() - photo_started
             settings = RefineSettings(iterations=cfg.refine_iterations, spp=cfg.refine_spp, erode=cfg.erode)
-            if roughness_prior is not None:
-                settings = replace(settings, roughness_prior=roughness_prior)
+            settings = replace(settings, **(settings_overrides or {}))
             started = time.perf_counter()
             result = refine_parts(FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp), scene, materials,
                                   sorted(scene.masks), envmap, exposure, settings,
@@ -106,12 +109,12 @@ def probe(pairs: int, roughness_prior: float | None = None) -> dict:
     return out
 
 
-def run_probe(pairs: int, empty_cache: bool, roughness_prior: float | None = None) -> dict:
+def run_probe(pairs: int, empty_cache: bool, settings: list[str]) -> dict:
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as cache:
         if empty_cache:
             env["DRJIT_CACHE_DIR"] = cache
-        extra = [] if roughness_prior is None else ["--roughness-prior", str(roughness_prior)]
+        extra = [arg for item in settings for arg in ("--set", item)]
         proc = subprocess.run([sys.executable, __file__, "--probe", "--pairs", str(pairs), *extra], env=env,
                               capture_output=True, text=True, check=True, timeout=1800)
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -121,16 +124,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--pairs", type=int, default=4)
     parser.add_argument("--empty-cache", action="store_true", help="also run with an empty Dr.Jit kernel cache")
-    parser.add_argument("--roughness-prior", type=float, default=None, help="override RefineSettings.roughness_prior")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a RefineSettings number (e.g. std_weight=0), repeatable")
     parser.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.probe:
-        print(json.dumps(probe(args.pairs, args.roughness_prior)))
+        print(json.dumps(probe(args.pairs, overrides(args.set))))
         return
-    runs = {"warm kernel cache": run_probe(args.pairs, False, args.roughness_prior)}
+    runs = {"warm kernel cache": run_probe(args.pairs, False, args.set)}
     if args.empty_cache:
-        runs["empty kernel cache"] = run_probe(args.pairs, True, args.roughness_prior)
-    record = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": platform.platform(),
+        runs["empty kernel cache"] = run_probe(args.pairs, True, args.set)
+    record = {"settings": overrides(args.set),
+              "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": platform.platform(),
               "cpus": os.cpu_count(), "load_average": os.getloadavg(), "runs": runs}
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "refine.json").write_text(json.dumps(record, indent=1))
