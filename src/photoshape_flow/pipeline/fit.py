@@ -14,6 +14,9 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    region (`fit.appearance.distance`), and the cost adds the ranking prior.
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
    classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
+5. Refinement (`pipeline.fit_refine`, `fit.refine`) of the winners of the pairs that are used
+   (publish's and each exemplar's best): tint, roughness scale, UV scale and rotation on the rank-1
+   rows' ``refinement``.
 
 Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
 start from, the candidate set and the lighting key; a pair whose hash is unchanged is skipped, and
