@@ -65,8 +65,12 @@ def boxes(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-
     texture = write_png(folder / "checker.png", np.stack([checker, (checker * 0.8).astype(np.uint8),
                                                           (checker * 0.6).astype(np.uint8)], axis=2))
     textured = MaterialSpec("checker", "fabric", maps={"albedo": texture}, params={"roughness": 0.8}, scale=0.5)
+    stripes = np.where((x // 8) % 2 == 0, 210, 60).astype(np.uint8)
+    striped = MaterialSpec("stripes", "wood", maps={"albedo": write_png(folder / "stripes.png", np.stack(
+        [stripes, (stripes * 0.7).astype(np.uint8), (stripes * 0.5).astype(np.uint8)], axis=2))},
+        params={"roughness": 0.7}, scale=0.5)
     plain = MaterialSpec("plain", "plastic", params={"albedo": [0.45, 0.45, 0.5], "roughness": 0.5}, scale=None)
-    return Renderer(), mesh, camera, envmap, textured, plain
+    return Renderer(), mesh, camera, envmap, textured, plain, striped
 
 
 def _photo_scene(boxes, materials, size: int = 64):  # type: ignore[no-untyped-def]
@@ -86,7 +90,7 @@ def test_refinement_recovers_a_known_albedo_tint(boxes) -> None:  # type: ignore
 
     from photoshape_flow.fit.scene import FrameRenderer
 
-    renderer, mesh, camera, envmap, textured, plain = boxes
+    renderer, mesh, camera, envmap, textured, plain, _ = boxes
     tint = (1.4, 0.9, 0.7)
     scene = _photo_scene(boxes, [replace(plain, refinement=Refinement(tint=tint)), plain])
     settings = RefineSettings(uv_scales=(1.0,), uv_rotations=(0.0,))  # the default 8 steps
@@ -103,7 +107,7 @@ def test_uv_search_recovers_a_known_texture_scale(boxes) -> None:  # type: ignor
 
     from photoshape_flow.fit.scene import FrameRenderer
 
-    renderer, mesh, camera, envmap, textured, plain = boxes
+    renderer, mesh, camera, envmap, textured, plain, _ = boxes
     scene = _photo_scene(boxes, [replace(textured, refinement=Refinement(uv_scale=2.0)), plain])
     found = uv_search(FrameRenderer(renderer, 64, 8), scene, [textured, plain], [1, 2], envmap, EXPOSURE,
                       RefineSettings(uv_rotations=(0.0,)))
@@ -121,3 +125,17 @@ def test_refined_textures_apply_tint_and_roughness_in_the_renderer(tmp_path: Pat
     base = material_textures(MaterialSpec("m", params={"albedo": [0.5, 0.5, 0.5], "roughness": 0.6}, scale=None))
     assert data["base_color"][0, 0] == pytest.approx(base["base_color"][0, 0] * np.array([2.0, 1.0, 0.5]), rel=1e-5)
     assert float(data["roughness"][0, 0, 0]) == 1.0  # clipped: 0.6 x 2
+
+
+def test_uv_search_recovers_a_known_texture_rotation(boxes) -> None:  # type: ignore[no-untyped-def]
+    """Stripes turned by 90 degrees are found among four rotations (identity would tie otherwise)."""
+    from dataclasses import replace
+
+    from photoshape_flow.fit.scene import FrameRenderer
+
+    renderer, mesh, camera, envmap, _, plain, striped = boxes
+    scene = _photo_scene(boxes, [replace(striped, refinement=Refinement(uv_rotation=math.pi / 2)), plain])
+    found = uv_search(FrameRenderer(renderer, 64, 8), scene, [striped, plain], [1, 2], envmap, EXPOSURE,
+                      RefineSettings(uv_scales=(1.0,)))
+    (scale, rotation), costs = found[1]
+    assert (scale, rotation) == (1.0, pytest.approx(math.pi / 2)) and costs["chosen"] < costs["identity"]

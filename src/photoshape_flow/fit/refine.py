@@ -6,11 +6,13 @@ material and fits four numbers (a `render.specs.Refinement`), never texels:
 
 - **UV scale and rotation** by a small search of forward renders (`uv_search`): Mitsuba's UV
   transform has no gradients, and the loss is periodic in both. A coordinate search: every scale
-  unrotated, then every rotation at each part's best scale (5 + 3 renders for the default grid, not
-  5 x 4), each render with every textured part at its point; each part keeps its own best, compared with the photo by
-  texture statistics that tolerate misalignment (the fit's gradient and contrast terms plus the
-  structure-tensor orientation, which the gradient magnitude cannot see). Identity wins ties
-  within `uv_margin`, so an untextured or isotropic material is not rotated at random.
+  unrotated, then every rotation at each part's best scale (5 + 3 renders for the default grid,
+  not 5 x 4), each render with every textured part at its point; each part keeps its own best,
+  compared with the photo by texture statistics that tolerate misalignment (the fit's gradient
+  and contrast terms plus the structure-tensor orientation, which the gradient magnitude does not
+  measure; on the two-box test the rotation is found without it too, so its weight is
+  unmeasured). Identity wins ties within `uv_margin`, so an untextured or isotropic material is
+  not rotated at random.
 - **Albedo tint** (3 values, log space) and **roughness scale** (log space) by Adam on Mitsuba's
   ``llvm_ad_rgb`` gradients (`render.gradients.GradientScene`), clamped to `tint_range` and
   `roughness_range`. The loss is per part, over the rendered part's eroded region: the relative L2
