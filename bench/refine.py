@@ -50,7 +50,7 @@ def overrides(items: list[str]) -> dict[str, float]:
     return {name: float(value) for name, value in (item.split("=", 1) for item in items)}
 
 
-def probe(pairs: int, settings_overrides: dict[str, float] | None = None) -> dict:
+def probe(pairs: int, settings_overrides: dict[str, float] | None = None, uv_spp: int | None = None) -> dict:
     from dataclasses import replace
 
     import numpy as np
@@ -88,7 +88,7 @@ def probe(pairs: int, settings_overrides: dict[str, float] | None = None) -> dic
             started = time.perf_counter()
             result = refine_parts(FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp), scene, materials,
                                   sorted(scene.masks), envmap, exposure, settings,
-                                  uv_frame=FrameRenderer(renderer, cfg.size, cfg.spp))
+                                  uv_frame=FrameRenderer(renderer, cfg.size, uv_spp or cfg.spp))
             seconds = time.perf_counter() - started
             by_index = {p.index: t for p, t in zip(shape.parts, truth, strict=True)}
             tint_before = [abs(1.0 - t) for i in result for t in by_index[i].tint]
@@ -109,12 +109,13 @@ def probe(pairs: int, settings_overrides: dict[str, float] | None = None) -> dic
     return out
 
 
-def run_probe(pairs: int, empty_cache: bool, settings: list[str]) -> dict:
+def run_probe(pairs: int, empty_cache: bool, settings: list[str], uv_spp: int | None = None) -> dict:
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as cache:
         if empty_cache:
             env["DRJIT_CACHE_DIR"] = cache
-        extra = [arg for item in settings for arg in ("--set", item)]
+        extra = [arg for item in settings for arg in ("--set", item)] + (
+            ["--uv-spp", str(uv_spp)] if uv_spp else [])
         proc = subprocess.run([sys.executable, __file__, "--probe", "--pairs", str(pairs), *extra], env=env,
                               capture_output=True, text=True, check=True, timeout=1800)
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -126,14 +127,15 @@ def main() -> None:
     parser.add_argument("--empty-cache", action="store_true", help="also run with an empty Dr.Jit kernel cache")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a RefineSettings number (e.g. std_weight=0), repeatable")
+    parser.add_argument("--uv-spp", type=int, default=None, help="spp of the UV search (default: fit.spp)")
     parser.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.probe:
-        print(json.dumps(probe(args.pairs, overrides(args.set))))
+        print(json.dumps(probe(args.pairs, overrides(args.set), args.uv_spp)))
         return
-    runs = {"warm kernel cache": run_probe(args.pairs, False, args.set)}
+    runs = {"warm kernel cache": run_probe(args.pairs, False, args.set, args.uv_spp)}
     if args.empty_cache:
-        runs["empty kernel cache"] = run_probe(args.pairs, True, args.set)
+        runs["empty kernel cache"] = run_probe(args.pairs, True, args.set, args.uv_spp)
     record = {"settings": overrides(args.set),
               "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": platform.platform(),
               "cpus": os.cpu_count(), "load_average": os.getloadavg(), "runs": runs}
