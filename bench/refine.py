@@ -9,8 +9,9 @@ with its three textured materials (albedo, roughness and normal maps) under its 
 known `Refinement` (tint 0.75-1.35 per channel, roughness x0.7-1.4, UV scale 0.7/1/1.4),
 path-traced at 128 px and 64 spp, exposed by 0.8, its part map shifted by one pixel (alignment is
 never exact). Refinement starts from the unadjusted materials with the medium profile's settings
-(`FitConfig`: fit frame 128 px at 8 spp for the UV search, gradient frame 64 px, 24 Adam steps
-at 4 spp) and is timed per pair; making the photos is not (subtracted from the process's time too).
+(`FitConfig`: the fit's 128 px frame at `refine_spp` 4 for the UV search, gradient frame 64 px,
+a warm start and 8 Adam steps at 4 spp) and is timed per pair; making the photos is not
+(subtracted from the process's time too).
 
 The probe runs in a fresh process (`--probe`), so the first pair pays the imports, Mitsuba's start
 and the kernels' compilation: with the Dr.Jit kernel cache on disk as a worker finds it, and with
@@ -88,7 +89,7 @@ def probe(pairs: int, settings_overrides: dict[str, float] | None = None, uv_spp
             started = time.perf_counter()
             result = refine_parts(FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp), scene, materials,
                                   sorted(scene.masks), envmap, exposure, settings,
-                                  uv_frame=FrameRenderer(renderer, cfg.size, uv_spp or cfg.spp))
+                                  uv_frame=FrameRenderer(renderer, cfg.size, uv_spp or cfg.refine_spp))
             seconds = time.perf_counter() - started
             by_index = {p.index: t for p, t in zip(shape.parts, truth, strict=True)}
             tint_before = [abs(1.0 - t) for i in result for t in by_index[i].tint]
@@ -127,7 +128,7 @@ def main() -> None:
     parser.add_argument("--empty-cache", action="store_true", help="also run with an empty Dr.Jit kernel cache")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a RefineSettings number (e.g. std_weight=0), repeatable")
-    parser.add_argument("--uv-spp", type=int, default=None, help="spp of the UV search (default: fit.spp)")
+    parser.add_argument("--uv-spp", type=int, default=None, help="spp of the UV search (default: fit.refine_spp)")
     parser.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.probe:

@@ -117,7 +117,7 @@ class FitConfig:
     refine_max_rank: int = 12  # pairs up to this rank per shape (keep equal to publish.max_rank) and each
     #                            exemplar's best pair are refined; the others keep the selection
     refine_iterations: int = 8  # Adam steps (after a closed-form warm start) on the tint and roughness scale
-    refine_spp: int = 4  # per gradient render (a new seed each step)
+    refine_spp: int = 4  # per gradient render (a new seed each step) and per UV-search render
     refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
 
 

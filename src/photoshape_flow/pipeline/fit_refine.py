@@ -52,9 +52,11 @@ def refine_rows(ctx: Any, data: Any, rows: Sequence[m.Assignment], light: dict[s
         return 0
     materials = [ctx.spec(chosen[p.index].material_id) if p.index in chosen else None for p in data.scene.mesh.parts]
     envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
-    frame = FrameRenderer(ctx.frame.renderer, ctx.cfg.refine_size, ctx.cfg.refine_spp)
-    settings = refine_settings(ctx.cfg)
-    result = refine_parts(frame, data.scene, materials, observed, envmap, exposure, settings, uv_frame=ctx.frame)
+    renderer, cfg = ctx.frame.renderer, ctx.cfg
+    frame = FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp)
+    uv_frame = FrameRenderer(renderer, cfg.size, cfg.refine_spp)  # the photo's frame; refine_spp: measured
+    settings = refine_settings(cfg)  # faster and no worse than fit.spp (docs/benchmarks.md)
+    result = refine_parts(frame, data.scene, materials, observed, envmap, exposure, settings, uv_frame=uv_frame)
     for index, refined in result.items():
         chosen[index].refinement = {**refined.to_dict(), "iterations": settings.iterations, "spp": settings.spp}
     return len(result)
