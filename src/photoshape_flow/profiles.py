@@ -112,6 +112,13 @@ class FitConfig:
     gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
+    # refinement of the winners (`fit.refine`, docs/decisions.md D35): only for the pairs publish uses
+    refine: bool = True
+    refine_max_rank: int = 12  # pairs up to this rank per shape (keep equal to publish.max_rank) and each
+    #                            exemplar's best pair are refined; the others keep the selection
+    refine_iterations: int = 8  # Adam steps (after a closed-form warm start) on the tint and roughness scale
+    refine_spp: int = 4  # per gradient render (a new seed each step) and per UV-search render
+    refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)
@@ -178,7 +185,8 @@ PROFILES: dict[str, Profile] = {
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
         training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
-        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2),
+        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=6,
+                      refine_size=48),
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
     ),
     "small": Profile(
@@ -188,7 +196,7 @@ PROFILES: dict[str, Profile] = {
         substances=SubstancesConfig(bootstrap_count=160, size=96, spp=16, network=replace(_CPU_SUBSTANCES, epochs=20)),
         training_renders=TrainingRendersConfig(count=320, size=96, spp=16),
         training=replace(_CPU_CLASSIFIER, epochs=4),
-        fit=FitConfig(size=96, spp=8, rotations=4),
+        fit=FitConfig(size=96, spp=8, rotations=4, refine_max_rank=1),
         publish=PublishConfig(max_rank=1, views=8, size=160, spp=32),
     ),
     "medium": Profile(
@@ -199,7 +207,7 @@ PROFILES: dict[str, Profile] = {
                                     network=replace(_CPU_SUBSTANCES, epochs=60)),
         training_renders=TrainingRendersConfig(count=3000, size=128, spp=32),
         training=replace(_CPU_CLASSIFIER, epochs=12, max_steps_per_epoch=80, image_size=128),
-        fit=FitConfig(size=128, spp=8, rotations=4),
+        fit=FitConfig(size=128, spp=8, rotations=4, refine_max_rank=1),
         publish=PublishConfig(max_rank=1, views=8, size=256, spp=64),
     ),
     "default": Profile(name="default"),

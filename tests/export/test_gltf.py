@@ -90,3 +90,54 @@ def test_texcoords_bake_the_texture_scale_formula(tiny_shape, tiny_materials):
     from photoshape_flow.render.scene import mitsuba_uvs
 
     np.testing.assert_allclose(uv, mitsuba_uvs(part, tiny_materials[0], jitter), rtol=1e-5, atol=1e-5)
+
+
+def _khr_apply(transform: dict, uv: np.ndarray) -> np.ndarray:
+    """KHR_texture_transform as its GLSL reference computes it: T(offset) R(rotation) S(scale) uv."""
+    c, s = np.cos(transform["rotation"]), np.sin(transform["rotation"])
+    rotation = np.array([[c, -s], [s, c]])  # mat3(cos, sin, 0, -sin, cos, 0, ...) is column-major
+    return (uv * np.array(transform["scale"])) @ rotation.T + np.array(transform["offset"])
+
+
+def test_refined_material_carries_tint_roughness_and_khr_texture_transform(tmp_path, tiny_shape, tiny_materials):
+    from dataclasses import replace
+
+    from photoshape_flow.render.scene import mitsuba_uvs
+    from photoshape_flow.render.specs import Refinement
+
+    refinement = Refinement(tint=(0.9, 0.6, 0.5), roughness_scale=0.7, uv_scale=1.4, uv_rotation=np.pi / 4)
+    refined = [replace(tiny_materials[0], refinement=refinement), tiny_materials[1]]
+    path = write_glb(tmp_path / "r.glb", tiny_shape, refined, [UVTransform(scale=1.2, rotation=0.3), None])
+    report = _validate(path)
+    assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
+    assert report["issues"]["numWarnings"] == 0, report["issues"]["messages"]
+    doc, blob = _read_glb(path)
+    assert doc["extensionsUsed"] == ["KHR_texture_transform"] and "extensionsRequired" not in doc
+    oak, steel = doc["materials"]
+    pbr = oak["pbrMetallicRoughness"]
+    assert pbr["baseColorFactor"] == pytest.approx([0.9, 0.6, 0.5, 1.0])
+    assert pbr["roughnessFactor"] == pytest.approx(0.7)
+    assert oak["extras"]["refinement"]["uv_scale"] == 1.4
+    transform = pbr["baseColorTexture"]["extensions"]["KHR_texture_transform"]
+    assert oak["normalTexture"]["extensions"]["KHR_texture_transform"] == transform
+    assert "extensions" not in steel["pbrMetallicRoughness"]["baseColorTexture"]
+    # the extension applied to the exported texcoords gives the UVs the renderer samples at
+    acc = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"]]
+    uv = np.frombuffer(blob, "<f4", acc["count"] * 2, doc["bufferViews"][acc["bufferView"]]["byteOffset"])
+    np.testing.assert_allclose(_khr_apply(transform, uv.reshape(-1, 2)),
+                               mitsuba_uvs(tiny_shape.parts[0], refined[0], UVTransform(scale=1.2, rotation=0.3)),
+                               rtol=1e-4, atol=1e-4)
+
+
+def test_a_tint_above_one_is_baked_into_the_texture(tiny_shape, tiny_materials):
+    from dataclasses import replace
+
+    from photoshape_flow.render.specs import Refinement
+
+    plain, _, _ = build_gltf(tiny_shape, tiny_materials)
+    refined = [replace(tiny_materials[0], refinement=Refinement(tint=(1.5, 1.0, 1.0))), tiny_materials[1]]
+    doc, _, _ = build_gltf(tiny_shape, refined)
+    assert doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] == [1.0, 1.0, 1.0, 1.0]  # glTF max
+    assert "extensionsUsed" not in doc  # no UV change: no extension
+    assert len(doc["images"]) == len(plain["images"])  # another base colour image replaces the library's
+    assert doc["images"][0] != plain["images"][0] or doc["bufferViews"] != plain["bufferViews"]

@@ -39,3 +39,19 @@ def test_obj_builtin_material_keeps_constant_colour(tmp_path, tiny_shape):
     write_obj(tmp_path / "b.obj", tiny_shape, [None, None])
     mtl = (tmp_path / "b.mtl").read_text()
     assert "newmtl chrome" in mtl and "Pm 1.000000" in mtl and "map_Kd" not in mtl
+
+
+def test_obj_carries_a_refinement_as_kd_and_baked_texcoords(tmp_path, tiny_shape, tiny_materials):
+    from dataclasses import replace
+
+    from photoshape_flow.render.specs import Refinement, refined_uv_matrix
+
+    refined = replace(tiny_materials[0], refinement=Refinement((0.8, 0.5, 0.4), 1.0, 1.4, 0.7))
+    write_obj(tmp_path / "r.obj", tiny_shape, [refined, tiny_materials[1]])
+    assert "Kd 0.800000 0.500000 0.400000" in (tmp_path / "r.mtl").read_text()  # multiplies map_Kd
+    seat = tiny_shape.parts[0]
+    expected = apply_uv_matrix(seat.uvs, refined_uv_matrix(seat.uv_density, refined))
+    scene = trimesh.load(tmp_path / "r.obj", force="scene", split_objects=True, group_material=False)
+    np.testing.assert_allclose(np.sort(scene.geometry["seat"].visual.uv, axis=0), np.sort(expected, axis=0),
+                               atol=1e-5)
+    assert not np.allclose(expected, apply_uv_matrix(seat.uvs, uv_matrix(seat.uv_density, 0.25)))

@@ -128,6 +128,14 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
         top1 = np.mean([ranked[0].material_id == truth_of[key] for key, ranked in observed.items()])
         moved = sum(ranked[0].material_id != planted[key] for key, ranked in by_part.items())
         assert first.details[f"fit:{rows[0].classifier_id}"]["parts_changed"] == moved > 0
+        # every pair is used (rank 1): each observed winner refined, on its rank-1 row only
+        refined = [ranked[0].refinement for ranked in observed.values()]
+        assert all(r is not None for r in refined)
+        assert first.details[f"fit:{rows[0].classifier_id}"]["parts_refined"] == len(refined)
+        assert all(r.refinement is None for ranked in by_part.values() for r in ranked[1:])
+        assert all(0.5 <= min(r["tint"]) and max(r["tint"]) <= 2.0 and 0.5 <= r["roughness_scale"] <= 2.0
+                   for r in refined)
+        assert np.median([r["loss_after"] / max(r["loss_before"], 1e-9) for r in refined]) < 1.0
         # the planted ranking's top-1 is always wrong; fit's was right on 7 of 13 parts when written
         assert len(observed) >= 6 and top1 >= 0.4, top1
         lit = {e.id: e.meta["fit_lighting"] for e in session.execute(sa.select(m.Exemplar)).scalars()

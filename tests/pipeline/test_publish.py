@@ -338,3 +338,44 @@ def get_settings_data_root() -> Path:
     from photoshape_flow.config import get_settings
 
     return get_settings().data_root
+
+
+@pytest.mark.render
+def test_publish_renders_and_exports_the_refined_look_with_a_before_after(db_url, store, tmp_path):
+    """A refined rank-1 row: publish renders the refined materials, the unrefined ones once more for the
+    gallery's before/after, and the exports carry the refinement (the XML renders the published image)."""
+    from photoshape_flow.pipeline.downloads import export_dir
+    from photoshape_flow.pipeline.gallery_site import write_gallery_site
+    from photoshape_flow.pipeline.photoshapes import UNREFINED_VIEW, assignment_set_keys
+    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.render.runtime import ensure_mitsuba
+    from photoshape_flow.render.tonemap import composite
+
+    ids = seed(db_url, store, tmp_path)
+    mk, good = f"classifier:{ids['classifier']}", ids["good"]
+    with session_scope(db_url) as s:
+        before_key = assignment_set_keys(s, [(good, mk)])[(good, mk)]
+        row = s.execute(sa.select(m.Assignment).where(m.Assignment.pair_id == good, m.Assignment.rank == 1)
+                        .order_by(m.Assignment.part_id)).scalars().first()
+        row.refinement = {"tint": [1.5, 0.6, 0.4], "roughness_scale": 0.6, "uv_scale": 1.4, "uv_rotation": 0.785398,
+                          "loss_before": 0.2, "loss_after": 0.05}
+    with session_scope(db_url) as s:
+        assert assignment_set_keys(s, [(good, mk)])[(good, mk)] != before_key  # another look, another set
+    run_publish(views=0, size=24, spp=4, formats=("glb", "xml"), pair_ids=[good])
+    renders = _renderings(db_url)
+    after = renders[("photoshape", f"{good}/{mk}/exemplar")]
+    before = renders[("photoshape", f"{good}/{mk}/{UNREFINED_VIEW}")]
+    published = store.load_image(after.blobs["srgb"]).astype(np.float32)
+    assert np.abs(published - store.load_image(before.blobs["srgb"]).astype(np.float32)).max() > 30
+    folder = export_dir(good, mk)
+    doc = json.loads((folder / "assignment.json").read_text())
+    assert doc["parts"][0]["extra"]["refinement"]["uv_scale"] == 1.4
+    glb = (folder / "photoshape.glb").read_bytes()
+    assert b"KHR_texture_transform" in glb and b"extensionsUsed" in glb
+    image = np.asarray(ensure_mitsuba().render(ensure_mitsuba().load_file(str(folder / "mitsuba" / "scene.xml"))))
+    _, srgb = composite(image[..., :3], image[..., 3], "white")
+    assert np.abs(srgb.astype(np.float32) - published).mean() <= 2.0
+    site = write_gallery_site(tmp_path / "site")
+    page = next((tmp_path / "site" / "pairs").glob(f"{good}-*.html")).read_text()
+    assert site.published == 1 and "before refinement" in page and "after refinement" in page
+    assert "tint 1.50 0.60 0.40" in page and UNREFINED_VIEW not in page  # not listed as a view of its own

@@ -337,6 +337,9 @@ class Assignment(TimestampMixin, ParamsHashMixin, Base):
     substance: Mapped[str | None] = mapped_column(Short)
     unobserved: Mapped[bool] = mapped_column(default=False, comment="part not visible: chosen by substance prior")
     params: Mapped[dict[str, Any]] = mapped_column(default=dict, comment="uv scale/rotation/offset used")
+    refinement: Mapped[dict[str, Any] | None] = mapped_column(
+        comment="fit.refine: tint, roughness_scale, uv_scale, uv_rotation, loss before/after"
+    )
 
 
 class Evaluation(Base):

@@ -20,6 +20,7 @@ Layout::
 from __future__ import annotations
 
 import hashlib
+import math
 import shutil
 import zipfile
 from collections.abc import Mapping, Sequence
@@ -55,6 +56,18 @@ class GalleryPart:
     score: float | None
     unobserved: bool = False
     posterior: float | None = None  # the ranking's posterior (ours); None for the baselines
+    refinement: Mapping[str, Any] | None = None  # `fit.refine`'s parameters and loss, where refined
+
+    @property
+    def refinement_text(self) -> str:
+        """The refinement in a few words (tint, roughness, UV; loss before -> after), or ""."""
+        r = self.refinement
+        if not r:
+            return ""
+        tint = " ".join(f"{float(t):.2f}" for t in r.get("tint", ()))
+        return (f"tint {tint}, roughness x{float(r.get('roughness_scale', 1)):.2f}, "
+                f"UV x{float(r.get('uv_scale', 1)):.2f} @ {math.degrees(float(r.get('uv_rotation', 0))):.0f} deg, "
+                f"loss {float(r.get('loss_before', 0)):.4f} -> {float(r.get('loss_after', 0)):.4f}")
 
     @property
     def confidence(self) -> float | None:
@@ -73,6 +86,7 @@ class GalleryEntry:
     parts: list[GalleryPart]
     exemplar_image: Path | None = None
     builtin_image: Path | None = None
+    unrefined_image: Path | None = None  # the exemplar view with the winners before refinement (`fit.refine`)
     renders: list[tuple[str, Path]] = field(default_factory=list)  # (view, image), exemplar view first
     hog_distance: float | None = None
     alignment_iou: float | None = None
@@ -215,8 +229,12 @@ def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets) -> None:
         (href, label) for fmt, label in DOWNLOAD_LABELS.items()
         if fmt in entry.downloads and (href := _download(root, entry.slug, fmt, entry.downloads[fmt]))
     ]
+    after = dict(entry.renders).get("exemplar")
+    before_after = [(src, caption) for path, caption in (
+        (entry.exemplar_image, "exemplar photo"), (entry.unrefined_image, "before refinement"),
+        (after, "after refinement")) if (src := assets.image(path)) is not None] if entry.unrefined_image else []
     page = render("gallery_pair.html", title=f"PhotoShape {entry.pair_id}: {entry.shape_name}", root="../",
-                  e=entry, figures=figures, downloads=downloads)
+                  e=entry, figures=figures, downloads=downloads, before_after=before_after)
     (root / "pairs" / f"{entry.slug}.html").write_text(page, encoding="utf-8")
     fault_point("gallery-writing")
 

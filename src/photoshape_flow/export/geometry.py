@@ -13,6 +13,11 @@ rather than expressed with KHR_texture_transform, because:
 
 The raw UVs are recoverable: `assignment.json` records each part's D_i, material scale and jitter.
 
+A material's `Refinement` UVs (`fit.refine`: a scale and rotation fitted to the photo) are baked
+too where the format has no transform of its own (OBJ, PLY); the glTF writer keeps them out
+(``bake_refinement=False``) and writes them as KHR_texture_transform (`khr_texture_transform`), with
+the tangents still built from the refined UVs so normal maps turn with the texture.
+
 Texture-space convention: `PartMesh.uvs` follow OBJ/OpenGL (v = 0 at the image's bottom row), and
 so do `ExportPart.texcoords` (OBJ and PLY write them as they are). glTF puts v = 0 at the *top* row,
 like Mitsuba's bitmap lookup, so the glTF writer flips v (`gltf_texcoords`), exactly as the
@@ -21,13 +26,14 @@ renderer does before handing UVs to Mitsuba (`render.scene.mitsuba_uvs`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from photoshape_flow.render.specs import apply_uv_matrix, uv_matrix
+from photoshape_flow.render.specs import apply_uv_matrix, refined_uv_matrix, uv_matrix
 
 
 @dataclass
@@ -72,8 +78,21 @@ def unit_normals(normals: np.ndarray, positions: np.ndarray, faces: np.ndarray) 
     return (n / length[:, None]).astype(np.float32)
 
 
+def khr_texture_transform(scale: float, rotation: float) -> dict[str, Any]:
+    """KHR_texture_transform of a refinement's uv' = R(rotation) @ (scale * uv) (OBJ UVs, v up) on glTF UVs.
+
+    glTF flips v (v' = 1 - v), and the extension computes T(offset) R(r) S(scale) with R(r) =
+    [[cos r, -sin r], [sin r, cos r]] on the flipped UVs; conjugating by the flip turns the rotation
+    the other way and moves the origin: r = -rotation, offset = (-s sin, 1 - s cos).
+    """
+    c, s = math.cos(rotation), math.sin(rotation)
+    return {"offset": [round(-scale * s, 9), round(1.0 - scale * c, 9)], "rotation": round(-rotation, 9),
+            "scale": [round(scale, 9), round(scale, 9)]}
+
+
 def export_parts(
-    shape: Any, materials: Sequence[Any] | None = None, uv_transforms: Sequence[Any] | None = None
+    shape: Any, materials: Sequence[Any] | None = None, uv_transforms: Sequence[Any] | None = None,
+    bake_refinement: bool = True,
 ) -> list[ExportPart]:
     """Parts of `shape` with baked texcoords; `materials[i]` / `uv_transforms[i]` belong to `shape.parts[i]`.
 
@@ -93,8 +112,8 @@ def export_parts(
         positions = np.asarray(part.vertices, np.float32).reshape(-1, 3)
         if faces.min() < 0 or faces.max() >= len(positions):
             raise ValueError(f"part {part.index} ({part.name}): face index out of range")
-        scale = None if spec is None else getattr(spec, "scale", None)
-        matrix = uv_matrix(part.uv_density, scale, jitter)
+        matrix = refined_uv_matrix(part.uv_density, spec, jitter) if bake_refinement else uv_matrix(
+            part.uv_density, None if spec is None else getattr(spec, "scale", None), jitter)
         uvs = np.asarray(part.uvs, np.float32).reshape(-1, 2)
         if len(uvs) != len(positions):
             uvs = np.zeros((len(positions), 2), np.float32)

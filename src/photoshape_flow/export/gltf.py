@@ -4,7 +4,10 @@ Layout: one scene with a root node (the PhotoShape) whose children are the parts
 triangle primitive per part (POSITION, NORMAL, TEXCOORD_0, uint32 indices). Materials use the core
 metallic-roughness model (see `export.pbr`): baseColor texture in sRGB, ORM texture linear with
 roughness in G and metallic in B, OpenGL-convention normal map. Texcoords carry the renderer's UV
-transform baked in (see `export.geometry` for why not KHR_texture_transform), samplers repeat.
+transform baked in (see `export.geometry` for why not KHR_texture_transform), samplers repeat; a
+refined material's UV scale and rotation (`fit.refine`) are the exception: KHR_texture_transform on
+each of its textures (listed in ``extensionsUsed``, not required: a viewer without it shows the
+library's tiling), and its tint and roughness scale are in its factors (`export.pbr`).
 Primitives with a normal map get a TANGENT attribute built from the baked UVs the way Mitsuba's
 `normalmap` frame is (dP/du), so viewers need not guess one (the validator warns when they must).
 Metadata (licences, assignment) goes into ``asset.extras`` and ``asset.copyright``, and names into
@@ -22,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from photoshape_flow.export.geometry import export_parts, gltf_texcoords, tangents
+from photoshape_flow.export.geometry import export_parts, gltf_texcoords, khr_texture_transform, tangents
 from photoshape_flow.export.pbr import EncodedImage, PbrMaterial, ResolveRef, content_file_name, pbr_materials
 from photoshape_flow.export.text import one_line, one_line_strings, safe_name
 
@@ -30,6 +33,7 @@ FLOAT, UINT32 = 5126, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT = 9729, 9987, 10497
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
+KHR_TEXTURE_TRANSFORM = "KHR_texture_transform"
 
 
 class _Builder:
@@ -98,6 +102,16 @@ class _Builder:
             self._images[key] = len(self.gltf["textures"]) - 1
         return self._images[key]
 
+    def texture_info(self, mat: PbrMaterial, image: EncodedImage, stem: str) -> dict[str, Any]:
+        """A textureInfo, with the material's refined UV transform as KHR_texture_transform when it has one."""
+        info: dict[str, Any] = {"index": self.texture(image, stem)}
+        if mat.uv_transform is not None:
+            info["extensions"] = {KHR_TEXTURE_TRANSFORM: khr_texture_transform(*mat.uv_transform)}
+            used = self.gltf.setdefault("extensionsUsed", [])
+            if KHR_TEXTURE_TRANSFORM not in used:
+                used.append(KHR_TEXTURE_TRANSFORM)
+        return info
+
     def material(self, mat: PbrMaterial) -> int:
         if id(mat) in self._materials:
             return self._materials[id(mat)]
@@ -108,14 +122,14 @@ class _Builder:
             "roughnessFactor": float(np.clip(mat.roughness_factor, 0, 1)),
         }
         if mat.base_color is not None:
-            pbr["baseColorTexture"] = {"index": self.texture(mat.base_color, f"{stem}_basecolor")}
+            pbr["baseColorTexture"] = self.texture_info(mat, mat.base_color, f"{stem}_basecolor")
         if mat.orm is not None:
-            pbr["metallicRoughnessTexture"] = {"index": self.texture(mat.orm, f"{stem}_orm")}
+            pbr["metallicRoughnessTexture"] = self.texture_info(mat, mat.orm, f"{stem}_orm")
         entry: dict[str, Any] = {"name": one_line(mat.name), "pbrMetallicRoughness": pbr, "doubleSided": True}
         if mat.normal is not None:
-            entry["normalTexture"] = {"index": self.texture(mat.normal, f"{stem}_normal")}
-        extras = {k: v for k, v in (("substance", one_line_strings(mat.substance)), ("scale", mat.scale))
-                  if v is not None}
+            entry["normalTexture"] = self.texture_info(mat, mat.normal, f"{stem}_normal")
+        extras = {k: v for k, v in (("substance", one_line_strings(mat.substance)), ("scale", mat.scale),
+                                    ("refinement", mat.refinement)) if v is not None}
         if mat.builtin:
             extras["builtin"] = True
         if extras:
@@ -150,7 +164,8 @@ def build_gltf(
 
     `content_names`: external images are named by their bytes (`pbr.content_file_name`), for a
     texture folder shared with other formats."""
-    parts = export_parts(shape, materials, uv_transforms)
+    parts = export_parts(shape, materials, uv_transforms, bake_refinement=False)
+    refined_uvs = {p.index: p.texcoords for p in export_parts(shape, materials, uv_transforms)}
     pbr = pbr_materials(shape, list(materials) if materials is not None else None,
                         resolve_ref=resolve_ref, max_texture_size=max_texture_size)
     by_index = {p.index: m for p, m in zip(shape.parts, pbr, strict=True)}
@@ -164,7 +179,8 @@ def build_gltf(
             "TEXCOORD_0": b.accessor(gltf_texcoords(part.texcoords), "VEC2", ARRAY_BUFFER),
         }
         if material.normal is not None:
-            frame = tangents(part.positions, part.normals, part.texcoords, part.faces)
+            # from the UVs the textures are sampled at (refinement included), as Mitsuba's frame is
+            frame = tangents(part.positions, part.normals, refined_uvs[part.index], part.faces)
             attributes["TANGENT"] = b.accessor(frame, "VEC4", ARRAY_BUFFER)
         primitive = {
             "attributes": attributes,

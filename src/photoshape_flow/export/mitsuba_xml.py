@@ -15,6 +15,12 @@ had ``mi.xml.dict_to_xml``) cannot serialise in-memory objects (mitsuba-renderer
 - ``transform_relocate`` then copies every referenced file (PLYs, EXRs) into ``meshes/`` and
   ``textures/`` beside the XML, so the folder is self-contained and relocatable.
 
+A refined material (`render.specs.Refinement`, `fit.refine`) needs nothing of its own here: its tint
+and roughness scale are in the texels `material_bsdf` hands over (written to the EXRs), and its UV
+scale and rotation in the PLYs' UVs, as the renderer bakes them. Why not a ``bitmap`` ``to_uv`` and
+a scaled texture: Mitsuba 3 has no texture-multiply plugin, and ``to_uv`` would not turn the
+normal map's tangent frame (see `render.scene`), so the XML would not render what publish rendered.
+
 The scene is the one `Renderer.beauty` renders, not only the one `build_scene` describes: the
 envmap is written as the renderer's persistent scene lights with it (resampled to
 `render.pool.ENVMAP_RESOLUTION`; without an envmap, the pool's constant-radiance envmap rather than

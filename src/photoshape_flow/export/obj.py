@@ -3,7 +3,9 @@
 One ``o``/``g`` group and one ``usemtl`` per part (the part's name), texcoords with the renderer's UV
 transform baked in (see `export.geometry`), OBJ's own v-up convention. The MTL carries:
 
-- ``Kd`` (linear base colour; 1 1 1 under a texture) and ``map_Kd`` (the sRGB albedo);
+- ``Kd`` (linear base colour; 1 1 1 under a texture, or a refinement's tint, which MTL readers
+  multiply with the map) and ``map_Kd`` (the sRGB albedo); a refinement's UV scale and rotation are
+  baked into the texcoords (MTL's ``-s`` has no rotation, and not every reader honours it);
 - the PBR extension of MTL (tinyobjloader, Blender 3.5+ importer): ``Pr``/``map_Pr`` roughness,
   ``Pm``/``map_Pm`` metallic (the scalar is the map's mean, for readers that ignore the map),
   ``norm`` for the OpenGL-convention normal map, also written as ``map_Bump -bm 1`` because that

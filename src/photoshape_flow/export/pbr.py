@@ -7,7 +7,12 @@ Every exporter (glTF, OBJ) reads a `PbrMaterial`, so all of them agree on one co
 - ORM: one linear RGB image, R = ambient occlusion (1: the material set has none), G = roughness,
   B = metallic; a channel without a map is filled with the material's constant so the factors stay 1;
 - normal: the OpenGL-convention (+Y green) tangent-space map as stored (glTF uses OpenGL too);
-- specular and height have no core glTF slot; they are listed in `extra_maps` for OBJ and the sidecar.
+- specular and height have no core glTF slot; they are listed in `extra_maps` for OBJ and the sidecar;
+- a `Refinement` (`fit.refine`) multiplies the base colour factor by its tint and the roughness factor
+  by its scale, clipped to 0..1 as the renderer clips them; where a factor cannot hold it (a tint
+  above 1 on a texture, a roughness scale above 1 on a map: glTF factors stop at 1) it is baked
+  into that texture instead, so every viewer shows what was rendered. Its UV scale and rotation are
+  kept in `uv_transform` for the formats that carry one (glTF's KHR_texture_transform).
 
 Materials come as `photoshape_flow.render.MaterialSpec` (read by attribute, so any object with `name`,
 `substance`, `maps`, `params` and `scale` works) or `None` for a part's built-in material, whose
@@ -71,6 +76,8 @@ class PbrMaterial:
     substance: str | None = None
     scale: float | None = None
     builtin: bool = False
+    uv_transform: tuple[float, float] | None = None  # the refinement's (uv scale, uv rotation radians)
+    refinement: dict[str, Any] | None = None  # `Refinement.to_dict()`, for the formats' metadata
 
 
 def _read(path: Path) -> np.ndarray:
@@ -180,7 +187,50 @@ def pbr_from_spec(spec: Any, *, max_texture_size: int | None = None) -> PbrMater
         out.roughness_factor = 1.0
         out.metallic_factor = 1.0
     out.extra_maps = {k: v for k, v in maps.items() if k in ("specular", "height")}
+    refinement = getattr(spec, "refinement", None)
+    if refinement is not None:
+        refine_pbr(out, refinement)
     return out
+
+
+def refine_pbr(mat: PbrMaterial, refinement: Any) -> None:
+    """Apply a `render.specs.Refinement` to a converted material in place (see the module docstring)."""
+    tint = np.asarray(refinement.tint, np.float64)
+    if mat.base_color is not None and tint.max() > 1.0:
+        mat.base_color = encode_png(_tinted_srgb(_decode(mat.base_color), tint))
+    else:
+        factor = np.clip(np.asarray(mat.base_color_factor[:3], np.float64) * tint, 0.0, 1.0)
+        mat.base_color_factor = (float(factor[0]), float(factor[1]), float(factor[2]), mat.base_color_factor[3])
+    scale = float(refinement.roughness_scale)
+    if mat.orm is not None and scale > 1.0:
+        orm = _decode(mat.orm)
+        orm[..., 1] = np.clip(np.rint(orm[..., 1].astype(np.float64) * scale), 0, 255).astype(np.uint8)
+        mat.orm = encode_png(orm)
+        if mat.roughness is not None:
+            mat.roughness = encode_png(orm[..., 1])
+    else:
+        mat.roughness_factor = float(np.clip(mat.roughness_factor * scale, 0.0, 1.0))
+    if refinement.uv_scale != 1.0 or refinement.uv_rotation != 0.0:
+        mat.uv_transform = (float(refinement.uv_scale), float(refinement.uv_rotation))
+    mat.refinement = refinement.to_dict()
+
+
+def _decode(image: EncodedImage) -> np.ndarray:
+    """An encoded 8-bit image back to an RGB array."""
+    import cv2
+
+    array = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_COLOR)
+    if array is None:
+        raise ValueError("could not decode a texture")
+    return np.ascontiguousarray(array[..., ::-1])
+
+
+def _tinted_srgb(srgb: np.ndarray, tint: np.ndarray) -> np.ndarray:
+    """An sRGB 8-bit image times a linear tint, clipped, back in sRGB 8-bit (as the renderer tints)."""
+    from photoshape_flow.render.specs import linear_to_srgb
+
+    linear = srgb_to_linear(srgb.astype(np.float64) / 255.0) * tint.reshape(1, 1, 3)
+    return np.clip(np.rint(linear_to_srgb(np.clip(linear, 0.0, 1.0)) * 255.0), 0, 255).astype(np.uint8)
 
 
 def _pack_orm(
@@ -231,7 +281,7 @@ def pbr_materials(
 ) -> list[PbrMaterial]:
     """One PbrMaterial per part of `shape` (`materials[i]` for `shape.parts[i]`, None = built-in).
 
-    Equal specs (same object or same name) are converted once, so shared materials share images.
+    Equal specs (same name and refinement) are converted once, so shared materials share images.
     """
     materials = list(materials) if materials is not None else [None] * len(shape.parts)
     if len(materials) != len(shape.parts):
@@ -243,7 +293,8 @@ def pbr_materials(
             out.append(pbr_from_builtin(part.builtin_material or {}, part_name=part.name,
                                         resolve_ref=resolve_ref, max_texture_size=max_texture_size))
             continue
-        key = str(spec.name)
+        refinement = getattr(spec, "refinement", None)
+        key = f"{spec.name}|{refinement.to_dict() if refinement is not None else ''}"
         if key not in cache:
             cache[key] = pbr_from_spec(spec, max_texture_size=max_texture_size)
         out.append(cache[key])

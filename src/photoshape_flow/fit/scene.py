@@ -56,6 +56,20 @@ class FrameRenderer:
         """(size, size) part indices of the shape in the frame (0 = background)."""
         return self._frame(mesh, camera)[2]
 
+    def render_ids(self, mesh: Any, camera: Any) -> np.ndarray:
+        """(render_size, render_size) part indices of the whole render before the crop: what
+        `gradient_scene` renders (a loss on it needs no differentiable crop and resize)."""
+        return self.renderer.part_ids(mesh, self._frame(mesh, camera)[0], size=self.render_size)
+
+    def gradient_scene(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
+                       max_depth: int = 3) -> Any:
+        """The renderer's scene at the frame's camera with differentiable tints and roughness
+        (`render.gradients.GradientScene`, a context manager), uncropped at `render_size`."""
+        from photoshape_flow.render.gradients import GradientScene
+
+        zoomed = self._frame(mesh, camera)[0]
+        return GradientScene(self.renderer, mesh, materials, zoomed, envmap, self.render_size, max_depth)
+
     def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
         """(size, size, 3) linear radiance in the frame, un-premultiplied (background 0).
 

@@ -14,6 +14,9 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    region (`fit.appearance.distance`), and the cost adds the ranking prior.
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
    classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
+5. Refinement (`pipeline.fit_refine`, `fit.refine`) of the winners of the pairs that are used
+   (publish's and each exemplar's best): tint, roughness scale, UV scale and rotation on the rank-1
+   rows' ``refinement``.
 
 Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
 start from, the candidate set and the lighting key; a pair whose hash is unchanged is skipped, and
@@ -49,6 +52,7 @@ from photoshape_flow.fit.scene import (
 )
 from photoshape_flow.fit.select import rank_candidates, scores_of
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.fit_refine import is_refined, refine_rows
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.store import BlobStore
@@ -70,6 +74,7 @@ class FitSummary:
     rows: int = 0
     lightings: int = 0  # lighting estimates computed (not reused)
     changed: int = 0  # parts whose first material differs from the classifier's
+    refined: int = 0  # parts whose winner was refined (`pipeline.fit_refine`)
 
 
 def weights_of(cfg: FitConfig) -> Weights:
@@ -290,9 +295,11 @@ def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tupl
 
 
 # -- one pair --------------------------------------------------------------------------------------------
-def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]], lighting_key: str) -> str:
-    """The hash a pair's fit rows carry: config, code, the ranking they start from, the candidates, the lighting."""
-    return stable_hash({**ctx.params, "ranking": data.source_hash, "lighting": lighting_key,
+def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]], lighting_key: str,
+              refine: bool = False) -> str:
+    """The hash a pair's fit rows carry: config, code, the ranking they start from, the candidates, the lighting,
+    and whether its winners are refined (`pipeline.fit_refine`)."""
+    return stable_hash({**ctx.params, "ranking": data.source_hash, "lighting": lighting_key, "refine": refine,
                         "candidates": {str(i): [c.material_id for c in cs] for i, cs in sorted(candidates.items())}})
 
 
@@ -378,14 +385,18 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                 # nothing observed: the ranking is copied, no lighting needed
                 light, computed = exemplar_lighting(session, ctx, data) if candidates else ({"key": None}, False)
                 summary.lightings += int(computed)
-                digest = pair_hash(ctx, data, candidates, str(light["key"]))
+                refine = bool(candidates) and is_refined(session, ctx, pair)
+                digest = pair_hash(ctx, data, candidates, str(light["key"]), refine)
                 if rows_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
                         session, stage, [str(pair_id)], params_hash=digest,
                         lease_seconds=settings.claim_lease_seconds, retry_failed=True):
                     summary.pairs_skipped += 1
                     continue
             with session_scope(url) as session:
-                rows = fit_rows(ctx, data, candidates, *select_materials(ctx, data, candidates, light), digest)
+                measured, exposure = select_materials(ctx, data, candidates, light)
+                rows = fit_rows(ctx, data, candidates, measured, exposure, digest)
+                if refine:
+                    summary.refined += refine_rows(ctx, data, rows, light, exposure)
                 session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair_id,
                                                               m.Assignment.method_key == ctx.method_key))
                 session.add_all(rows)
@@ -399,7 +410,7 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
             summary.pairs_failed.append((pair_id, reason))
             with session_scope(url) as session:
                 claims.fail(session, stage, str(pair_id), reason)
-    log.info("fit %s: %d pairs, %d rows, %d parts changed, %d skipped, %d failed, %d lighting estimates",
-             ctx.method_key, summary.pairs_done, summary.rows, summary.changed, summary.pairs_skipped,
+    log.info("fit %s: %d pairs, %d rows, %d parts changed, %d refined, %d skipped, %d failed, %d lighting estimates",
+             ctx.method_key, summary.pairs_done, summary.rows, summary.changed, summary.refined, summary.pairs_skipped,
              len(summary.pairs_failed), summary.lightings)
     return summary

@@ -18,7 +18,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.grading import current_grades
-from photoshape_flow.pipeline.photoshapes import candidate_method_keys, provenance
+from photoshape_flow.pipeline.photoshapes import UNREFINED_VIEW, candidate_method_keys, provenance
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
@@ -55,7 +55,7 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
                         material_name=mat.name if mat else None,
                         substance=(a.substance if a else None) or (mat.substance if mat else None),
                         score=a.score if a else None, unobserved=bool(a.unobserved) if a else False,
-                        posterior=a.posterior if a else None)
+                        posterior=a.posterior if a else None, refinement=a.refinement if a else None)
             for part, a, mat in rows
         ]
         used.update(p.material_id for p in parts if p.material_id is not None)
@@ -67,6 +67,8 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
         shown = {(params or {}).get("assignment_set") for key, _, params in renders if key.endswith("/exemplar")}
         views = sorted(((key.rsplit("/", 1)[-1], blob_path((blobs or {}).get("srgb"))) for key, blobs, _ in renders),
                        key=lambda v: (v[0] != "exemplar", v[0]))
+        unrefined = dict(views).get(UNREFINED_VIEW)  # before refinement: shown beside the exemplar view
+        views = [(view, path) for view, path in views if view != UNREFINED_VIEW]
         builtin = session.execute(
             sa.select(m.Rendering.blobs).where(m.Rendering.kind == "builtin", m.Rendering.key == f"{pair_id}/exemplar",
                                               m.Rendering.status == STATUS_OK)
@@ -86,7 +88,7 @@ def gallery_data(session: Session, store: BlobStore, method: str | None = None,
             pair_id=pair_id, method_key=method_key, shape_name=shape.name or shape.source_id,
             exemplar_name=exemplar.name or exemplar.source_id, parts=parts,
             exemplar_image=blob_path(exemplar.image_blob),
-            builtin_image=blob_path((builtin or {}).get("srgb")),
+            builtin_image=blob_path((builtin or {}).get("srgb")), unrefined_image=unrefined,
             renders=[(view, path) for view, path in views if path is not None],
             hog_distance=pair.distance, alignment_iou=iou,
             grade=grade.label if grade else None, grade_note=grade.note if grade else None,

@@ -10,7 +10,10 @@ The envmap is chosen deterministically (`choose_envmap`): enabled and ok rows, p
 sky) when there is none.
 
 Assignment UV transforms: ``Assignment.params["uv"] = {"scale", "rotation", "offset"}`` when the
-inference stage recorded one, otherwise none (the texture-scale formula alone).
+inference stage recorded one, otherwise none (the texture-scale formula alone). A rank-1 row's
+``refinement`` (`fit.refine`: tint, roughness scale, UV scale and rotation) goes onto its material
+spec, so renders and exports show the refined look; `PhotoShape.unrefined` keeps the specs without
+it for the gallery's before/after render (view `UNREFINED_VIEW`).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import sqlalchemy as sa
@@ -35,6 +38,7 @@ DEFAULT_METHOD = "classifier"
 TURNTABLE_CAMERA = (math.radians(20.0), 2.6, 40.0)
 FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
 EXEMPLAR_VIEW = "exemplar"
+UNREFINED_VIEW = "exemplar-unrefined"  # the exemplar view with the winners before refinement
 
 
 def render_seed(global_seed: int, kind: str, key: str) -> int:
@@ -91,6 +95,12 @@ def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]]) -> d
     if not wanted:
         return {}
     rows: dict[tuple[int, str], list[list[Any]]] = {}
+    refinements = {  # refined looks are other sets; unrefined rows keep the keys they had
+        (pair_id, method_key, part_id): refinement for pair_id, method_key, part_id, refinement in session.execute(
+            sa.select(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.refinement)
+            .where(m.Assignment.rank == 1, m.Assignment.refinement.is_not(None),
+                   m.Assignment.pair_id.in_(sorted({p for p, _ in wanted}))))
+    }
     query = (
         sa.select(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.material_id,
                   m.Assignment.substance, m.Assignment.classifier_id, m.Assignment.params)
@@ -100,7 +110,9 @@ def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]]) -> d
     for pair_id, method_key, part_id, material_id, substance, classifier_id, params in session.execute(query):
         if (pair_id, method_key) in wanted:
             rows.setdefault((pair_id, method_key), []).append(
-                [part_id, material_id, substance, classifier_id, (params or {}).get("uv")])
+                [part_id, material_id, substance, classifier_id, (params or {}).get("uv"),
+                 *([refinements[(pair_id, method_key, part_id)]] if (pair_id, method_key, part_id) in refinements
+                   else [])])
     return {key: stable_hash({"method_key": key[1], "parts": parts}) for key, parts in rows.items()}
 
 
@@ -151,6 +163,7 @@ class PhotoShape:
     envmap_id: int | None = None
     exemplar_blob: str | None = None
     material_rows: dict[int, Any] = field(default_factory=dict)
+    unrefined: list[Any] | None = None  # `materials` without their refinements; None when no part is refined
 
 
 def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key: str,
@@ -158,7 +171,7 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
     """Read a candidate's rows and blobs into render/export inputs; a one-line error when incomplete."""
     from photoshape_flow.geometry.mesh import ShapeMesh
     from photoshape_flow.pipeline.training_renders import material_spec
-    from photoshape_flow.render import Camera, EnvmapSpec
+    from photoshape_flow.render import Camera, EnvmapSpec, Refinement
 
     pair = session.get(m.Pair, pair_id)
     if pair is None:
@@ -180,13 +193,17 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
     material_rows = {r.id: r for r in session.execute(sa.select(m.Material).where(m.Material.id.in_(material_ids)))
                      .scalars()}
     specs: dict[int, Any] = {mid: material_spec(row, store) for mid, row in material_rows.items()}
-    materials, jitters, assigned, fingerprint_parts = [], [], [], []
+    materials, jitters, assigned, fingerprint_parts, unrefined = [], [], [], [], []
     classifier_id = None
     for part_mesh in mesh.parts:
         row_part = parts.get(part_mesh.index)
         a = rows.get(row_part.id) if row_part is not None else None
         spec = specs.get(a.material_id) if a is not None and a.material_id is not None else None
         jitter = _uv_transform(a.params) if a is not None and spec is not None else None
+        refinement = a.refinement if a is not None and spec is not None and a.refinement else None
+        unrefined.append(spec)
+        if refinement is not None:
+            spec = replace(spec, refinement=Refinement.from_dict(refinement))
         materials.append(spec)
         jitters.append(jitter)
         classifier_id = classifier_id or (a.classifier_id if a is not None else None)
@@ -198,12 +215,14 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
             score=a.score if a is not None else None, unobserved=bool(a.unobserved) if a is not None else False,
             uv_density=float(part_mesh.uv_density), material_scale=spec.scale if spec is not None else None,
             uv_transform=jitter.to_dict() if jitter is not None else None,
+            extra={"refinement": refinement} if refinement is not None else {},
         ))
         fingerprint_parts.append({
             "part": part_mesh.index,
             "material": None if mat is None else [mat.id, mat.params_hash, mat.maps, mat.params, mat.default_scale],
             "builtin": part_mesh.builtin_material if spec is None else None,
             "uv": jitter.to_dict() if jitter is not None else None,
+            **({"refinement": refinement} if refinement is not None else {}),
         })
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
     envmap_spec = EnvmapSpec(path=store.resolve(envmap.blob)) if envmap is not None else None
@@ -224,7 +243,7 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
         classifier_id=classifier_id, mesh=mesh, materials=materials, uv_transforms=jitters, camera=camera,
         document=document, fingerprint=fingerprint, envmap=envmap_spec,
         envmap_id=envmap.id if envmap is not None else None, exemplar_blob=exemplar.image_blob,
-        material_rows=material_rows,
+        material_rows=material_rows, unrefined=unrefined if unrefined != materials else None,
     )
 
 

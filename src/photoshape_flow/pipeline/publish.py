@@ -47,6 +47,7 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.photoshapes import (
     DEFAULT_METHOD,
+    UNREFINED_VIEW,
     PhotoShape,
     assignment_set_keys,
     candidate_method_keys,
@@ -148,6 +149,9 @@ def run_publish(
         jobs = [("photoshape", render_key(pair_id, method_key, view), camera, item.materials, item.uv_transforms)
                 for view, camera in framed]
         jobs.append(("builtin", f"{pair_id}/exemplar", framed[0][1], [None] * len(item.mesh.parts), None))
+        if item.unrefined is not None:  # the gallery's before/after of the refinement (`fit.refine`)
+            jobs.append(("photoshape", render_key(pair_id, method_key, UNREFINED_VIEW), framed[0][1], item.unrefined,
+                         item.uv_transforms))
         with session_scope(url) as session:
             existing = {kind: _existing(session, kind, [k for kd, k, *_ in jobs if kd == kind])
                         for kind in ("photoshape", "builtin")}

@@ -15,6 +15,7 @@ from photoshape_flow.render.runtime import RendererUnavailableError
 from photoshape_flow.render.specs import (
     EnvmapSpec,
     MaterialSpec,
+    Refinement,
     UVTransform,
     linear_to_srgb,
     material_from_builtin,
@@ -41,6 +42,7 @@ __all__ = [
     "Camera",
     "EnvmapSpec",
     "MaterialSpec",
+    "Refinement",
     "Renderer",
     "RendererUnavailableError",
     "SceneOptions",

@@ -250,7 +250,9 @@ class BeautyPool:
                 jitter_key = None if jitter is None else (
                     float(jitter.scale), float(jitter.rotation), *(float(v) for v in jitter.offset)
                 )
-                wanted[f"{key}.vertex_texcoords"] = (self._geometry, material.scale, jitter_key)
+                refined = material.refinement
+                refined_key = (refined.uv_scale, refined.uv_rotation) if refined is not None else None
+                wanted[f"{key}.vertex_texcoords"] = (self._geometry, material.scale, jitter_key, refined_key)
         self._apply(wanted, parts, materials, jitters)
         self._shape_ref = weakref.ref(shape)
         return self.scene

@@ -63,8 +63,8 @@ from photoshape_flow.render.specs import (
     MaterialSpec,
     UVTransform,
     apply_uv_matrix,
+    refined_uv_matrix,
     srgb_to_linear,
-    uv_matrix,
 )
 
 AOV_CHANNELS: dict[str, tuple[str, int]] = {
@@ -102,8 +102,8 @@ def part_index_from_key(key: str) -> int:
 
 
 def mitsuba_uvs(part: PartMesh, material: MaterialSpec | None, jitter: UVTransform | None) -> np.ndarray:
-    """The UVs Mitsuba gets for `part`: the texture-scale formula and jitter, then v flipped."""
-    matrix = uv_matrix(part.uv_density, material.scale if material is not None else None, jitter)
+    """The UVs Mitsuba gets for `part`: the texture-scale formula, jitter and refinement, then v flipped."""
+    matrix = refined_uv_matrix(part.uv_density, material, jitter)
     uvs = apply_uv_matrix(part.uvs, matrix)
     uvs[:, 1] = 1.0 - uvs[:, 1]
     return uvs
@@ -220,7 +220,16 @@ def material_textures(material: MaterialSpec, max_texture_size: int = 1024) -> d
     else:
         specular = float(params.get("specular", DEFAULTS["specular"]))
     out["specular"] = float(np.clip(specular, 0.0, 1.0))
+    if material.refinement is not None:
+        out.update(refined_textures(out["base_color"], out["roughness"], material.refinement))
     return out
+
+
+def refined_textures(base_color: np.ndarray, roughness: np.ndarray, refinement: Any) -> dict[str, np.ndarray]:
+    """The base colour times the tint and the roughness times its scale, each clipped to 0..1 (`Refinement`)."""
+    tint = np.asarray(refinement.tint, np.float32).reshape(1, 1, 3)
+    return {"base_color": aligned(np.clip(base_color * tint, 0.0, 1.0)),
+            "roughness": aligned(np.clip(roughness * np.float32(refinement.roughness_scale), 0.0, 1.0))}
 
 
 def _bitmap(array: np.ndarray) -> dict[str, Any]:

@@ -36,6 +36,7 @@ class MaterialSpec:
     maps: dict[str, Path] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
     scale: float | None = 0.25
+    refinement: Refinement | None = None  # fitted to one part's photo (`fit.refine`); None: the library's look
 
     def __post_init__(self) -> None:
         unknown = set(self.maps) - set(CHANNELS)
@@ -44,6 +45,41 @@ class MaterialSpec:
         self.maps = {k: Path(v) for k, v in self.maps.items()}
         if self.scale is not None and not self.scale > 0:
             raise ValueError(f"material {self.name}: scale must be > 0, got {self.scale}")
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """A library material adjusted to one part's photo (`fit.refine`): a few parameters, never texels.
+
+    ``tint`` multiplies the linear base colour (map or constant), ``roughness_scale`` the roughness,
+    both clipped to 0..1 after (what glTF factors can express, and what the renderer renders);
+    ``uv_scale``/``uv_rotation`` (radians) transform the UVs after the texture-scale formula and the
+    jitter: uv' = R(uv_rotation) @ (uv_scale * uv). Why a separate record rather than new texture
+    files: the library texture stays shared, and every format can carry the few numbers as its own
+    factors (glTF baseColorFactor, KHR_texture_transform; MTL Kd).
+    """
+
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    roughness_scale: float = 1.0
+    uv_scale: float = 1.0
+    uv_rotation: float = 0.0
+
+    @property
+    def has_uv(self) -> bool:
+        return self.uv_scale != 1.0 or self.uv_rotation != 0.0
+
+    def uv_transform(self) -> UVTransform:
+        return UVTransform(self.uv_scale, self.uv_rotation)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"tint": [float(t) for t in self.tint], "roughness_scale": float(self.roughness_scale),
+                "uv_scale": float(self.uv_scale), "uv_rotation": float(self.uv_rotation)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Refinement:
+        tint = data.get("tint", (1.0, 1.0, 1.0))
+        return cls((float(tint[0]), float(tint[1]), float(tint[2])), float(data.get("roughness_scale", 1.0)),
+                   float(data.get("uv_scale", 1.0)), float(data.get("uv_rotation", 0.0)))
 
 
 @dataclass(frozen=True)
@@ -107,6 +143,15 @@ def uv_matrix(uv_density: float, material_scale: float | None, jitter: UVTransfo
             ]
         )
         matrix = j @ matrix
+    return matrix
+
+
+def refined_uv_matrix(uv_density: float, material: Any, jitter: UVTransform | None = None) -> np.ndarray:
+    """`uv_matrix` of a part with `material` (a MaterialSpec or None), then the material's refinement UVs."""
+    matrix = uv_matrix(uv_density, getattr(material, "scale", None), jitter)
+    refinement = getattr(material, "refinement", None)
+    if refinement is not None and refinement.has_uv:
+        matrix = uv_matrix(1.0, None, refinement.uv_transform()) @ matrix
     return matrix
 
 

@@ -34,6 +34,7 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
         details={summary.method_key or "fit": {"pairs": summary.pairs_done, "rows": summary.rows,
-                                               "parts_changed": summary.changed, "lightings": summary.lightings,
+                                               "parts_changed": summary.changed, "parts_refined": summary.refined,
+                                               "lightings": summary.lightings,
                                                "failed": summary.pairs_failed[:20]}},
     )

@@ -1,7 +1,7 @@
 """evaluation.ci_low / ci_high: each figure's 95% bootstrap interval over exemplars
 
 Revision ID: 7d3f0e2a9c15
-Revises: 3b8e4f1a6c27
+Revises: 7c2d9e4b1f05
 Create Date: 2026-11-24 19:00:00
 
 Two nullable columns: rows evaluated before keep NULL (no interval was computed); the next
@@ -16,7 +16,7 @@ import sqlalchemy as sa
 from alembic import op
 
 revision: str = '7d3f0e2a9c15'
-down_revision: str | None = '3b8e4f1a6c27'
+down_revision: str | None = '7c2d9e4b1f05'
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 

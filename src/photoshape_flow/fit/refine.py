@@ -1,0 +1,326 @@
+"""Refine the fit's winners: a few parameters per part, fitted to the photo by rendering (issue 26 item 5).
+
+The library holds a finite set of materials; the photo's is usually a little lighter, warmer,
+glossier or more finely patterned than the nearest one. So each refined part keeps its chosen
+material and fits four numbers (a `render.specs.Refinement`), never texels:
+
+- **UV scale and rotation** by a small search of forward renders (`uv_search`): Mitsuba's UV
+  transform has no gradients, and the loss is periodic in both. A coordinate search: every scale
+  unrotated, then every rotation at each part's best scale (5 + 3 renders for the default grid,
+  not 5 x 4), each render with every textured part at its point; each part keeps its own best,
+  compared with the photo by texture statistics that tolerate misalignment (the fit's gradient
+  and contrast terms plus the structure-tensor orientation, which the gradient magnitude does not
+  measure; on the two-box test the rotation is found without it too, so its weight is
+  unmeasured). Identity wins ties within `uv_margin`, so an untextured or isotropic material is
+  not rotated at random.
+- **Albedo tint** (3 values, log space) and **roughness scale** (log space) by Adam on Mitsuba's
+  ``llvm_ad_rgb`` gradients (`render.gradients.GradientScene`), clamped to `tint_range` and
+  `roughness_range`. The loss is per part, over the rendered part's eroded region: the relative L2
+  of the mean linear colour after the stage's exposure against the photo region's mean, plus
+  `std_weight` x the same for the per-channel standard deviation (the light structural term:
+  highlights and texture contrast, which roughness moves). Region statistics, not pixels, for the
+  reason of docs/decisions.md D32: alignment is off by a few pixels. The tint starts where the
+  first render's region means say it should if radiance were linear in the albedo (`warm_start`),
+  so a few Adam steps suffice (they correct interreflections, clipping and the std term); a new
+  seed every step, low spp: Adam averages the noise.
+
+All parts are refined in the same renders. `refine_parts` returns, per part, the refinement and the
+gradient loss before and after (both at seed 0, so the noise is the same; "before" already has the
+searched UV placement, whose own gain is in ``uv_cost``: identity's and the chosen point's).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from photoshape_flow.fit import lighting as lt
+from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, to_lab
+from photoshape_flow.render.specs import Refinement
+
+TEXTURED = ("albedo", "roughness", "normal")  # maps whose placement the UV transform moves
+
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """How hard to refine (the `FitConfig` refine fields)."""
+
+    iterations: int = 8
+    spp: int = 4
+    learning_rate: float = 0.1
+    tint_range: tuple[float, float] = (0.5, 2.0)
+    roughness_range: tuple[float, float] = (0.5, 2.0)
+    std_weight: float = 0.25
+    roughness_prior: float = 0.0  # x sum of squared log roughness scales: stay at 1 without support
+    uv_scales: tuple[float, ...] = (0.5, 0.7, 1.0, 1.4, 2.0)
+    uv_rotations: tuple[float, ...] = (0.0, 45.0, 90.0, 135.0)  # degrees
+    uv_margin: float = 0.03  # a UV hypothesis must beat identity by this fraction of its cost
+    orientation_weight: float = 1.0
+    max_depth: int = 3
+    erode: int = 1
+
+
+@dataclass
+class PartRefinement:
+    """One part's fitted refinement and its loss (the `refine_parts` loss) before and after."""
+
+    refinement: Refinement
+    loss_before: float
+    loss_after: float
+    uv_cost: dict[str, float] = field(default_factory=dict)  # "identity", "chosen": the search's costs
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self.refinement.to_dict(), "loss_before": round(self.loss_before, 6),
+                "loss_after": round(self.loss_after, 6),
+                **({"uv_cost": {k: round(v, 6) for k, v in self.uv_cost.items()}} if self.uv_cost else {})}
+
+
+# -- pure pieces -----------------------------------------------------------------------------------------
+def region_targets(linear: np.ndarray, masks: Mapping[int, np.ndarray]) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Per region: (mean, std) of linear RGB, what the rendered region is fitted to."""
+    out = {}
+    for index, mask in masks.items():
+        pixels = np.asarray(linear)[np.asarray(mask, bool)].reshape(-1, 3).astype(np.float64)
+        if len(pixels):
+            out[index] = (pixels.mean(axis=0), pixels.std(axis=0))
+    return out
+
+
+def region_loss(mean: np.ndarray, std: np.ndarray, target: tuple[np.ndarray, np.ndarray], exposure: float,
+                std_weight: float) -> float:
+    """The refinement loss of one region given its rendered statistics (NumPy twin of the Dr.Jit loss)."""
+    t_mean, t_std = target
+    level = t_mean + 0.02
+    return float(np.mean(((exposure * mean - t_mean) / level) ** 2)
+                 + std_weight * np.mean(((exposure * std - t_std) / level) ** 2))
+
+
+def orientation(lab: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The region's dominant texture orientation as a doubled-angle vector in the unit disc.
+
+    From the structure tensor of L* (mean gx^2, gy^2, gx gy over the region): ((Jxx - Jyy), 2 Jxy) /
+    (Jxx + Jyy). Length 0: no preferred direction; rotating the texture by t turns it by 2t.
+    """
+    lightness = np.ascontiguousarray(lab[..., 0], np.float32)
+    mask = np.asarray(mask, bool)
+    if not mask.any():
+        return np.zeros(2)
+    filled = np.where(mask, lightness, np.float32(lightness[mask].mean()))
+    gx = cv2.Sobel(filled, cv2.CV_32F, 1, 0, ksize=3)[mask].astype(np.float64)
+    gy = cv2.Sobel(filled, cv2.CV_32F, 0, 1, ksize=3)[mask].astype(np.float64)
+    jxx, jyy, jxy = (gx * gx).mean(), (gy * gy).mean(), (gx * gy).mean()
+    total = jxx + jyy
+    return np.zeros(2) if total <= 1e-9 else np.array([jxx - jyy, 2.0 * jxy]) / total
+
+
+def choose_uv(costs: Mapping[tuple[float, float], float], margin: float) -> tuple[float, float]:
+    """The (scale, rotation) of lowest cost; identity (1, 0) unless that beats it by `margin` of its cost."""
+    best = min(costs, key=lambda k: (costs[k], abs(math.log(k[0])), k[1]))
+    identity = (1.0, 0.0)
+    if identity in costs and costs[best] > (1.0 - margin) * costs[identity]:
+        return identity
+    return best
+
+
+def warm_start(target: np.ndarray, rendered: np.ndarray, exposure: float,
+               bounds: tuple[float, float]) -> list[float]:
+    """Log tint that makes a region's exposed mean colour the photo's if radiance were linear in the
+    albedo (one bounce): log(target / (exposure * rendered)), clamped. Adam starts here and corrects
+    what the assumption misses (interreflections, clipped texels, the std term)."""
+    ratio = np.asarray(target, np.float64) / np.maximum(exposure * np.asarray(rendered, np.float64), 1e-6)
+    low, high = log_range(bounds)
+    return [float(np.clip(math.log(max(r, 1e-6)), low, high)) for r in ratio]
+
+
+def log_range(bounds: tuple[float, float]) -> tuple[float, float]:
+    """A multiplier's range in log space, where Adam steps it (equal steps up and down)."""
+    return math.log(bounds[0]), math.log(bounds[1])
+
+
+def is_textured(spec: Any) -> bool:
+    return spec is not None and any(k in (getattr(spec, "maps", None) or {}) for k in TEXTURED)
+
+
+def with_refinement(spec: Any, refinement: Refinement | None) -> Any:
+    return spec if spec is None else dataclasses.replace(spec, refinement=refinement)
+
+
+# -- the render loops ------------------------------------------------------------------------------------
+def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[int], envmap: Any,
+              exposure: float, settings: RefineSettings) -> dict[int, tuple[tuple[float, float], dict[str, float]]]:
+    """Per textured part of `parts`: ((scale, rotation radians), {"identity": cost, "chosen": cost}).
+
+    `scene` is the pair's `fit.scene.FitScene` (its photo and regions) at `frame`'s size (see the
+    module docstring for the search).
+    """
+    positions = {p.index: k for k, p in enumerate(scene.mesh.parts)}
+    textured = [i for i in parts if i in positions and is_textured(materials[positions[i]])
+                and i in scene.photo_stats]
+    if not textured:
+        return {}
+    ids = frame.part_ids(scene.mesh, scene.camera)
+    regions = {i: erode(ids == i, settings.erode) for i in textured}
+    photo_lab = scene.photo_lab
+    photo_orientation = {i: orientation(photo_lab, scene.masks[i]) for i in textured}
+    weights = Weights(color=0.0, contrast=0.5, gradient=1.0)
+    costs: dict[int, dict[tuple[float, float], float]] = {i: {} for i in textured}
+
+    def measure(points: Mapping[int, tuple[float, float]]) -> None:
+        """One render with part i at points[i]; each part's cost at its point."""
+        trial = list(materials)
+        for i, (scale, rotation) in points.items():
+            trial[positions[i]] = with_refinement(materials[positions[i]], Refinement(uv_scale=scale,
+                                                                                      uv_rotation=rotation))
+        lab = to_lab(lt.exposed_srgb(scene.render(frame, trial, envmap), exposure))
+        for i, point in points.items():
+            rendered = appearance(lab, regions[i])
+            if rendered is not None:
+                costs[i][point] = distance(rendered, scene.photo_stats[i], weights) + settings.orientation_weight * (
+                    float(np.linalg.norm(orientation(lab, regions[i]) - photo_orientation[i])))
+
+    # coordinate search: every scale unrotated, then every rotation at each part's best scale
+    for scale in settings.uv_scales:
+        measure({i: (float(scale), 0.0) for i in textured})
+    best_scale = {i: min(by_point, key=lambda k: by_point[k])[0] for i, by_point in costs.items() if by_point}
+    for degrees in settings.uv_rotations:
+        if degrees % 360:
+            measure({i: (best_scale[i], math.radians(degrees)) for i in best_scale})
+    out = {}
+    for i, by_point in costs.items():
+        if by_point:
+            chosen = choose_uv(by_point, settings.uv_margin)
+            out[i] = (chosen, {"identity": by_point.get((1.0, 0.0), math.nan), "chosen": by_point[chosen]})
+    return out
+
+
+class RegionLoss:
+    """`region_loss` of every refined part on a Dr.Jit render, weighted by pixel share (differentiable).
+
+    One scatter-add per statistic (sums of each channel and of its square over every part's pixels)
+    rather than a masked reduction per part and channel: a few kernels per step whatever the part
+    count. `labels` (H, W): the part's position in `parts` for its region's pixels, -1 elsewhere.
+    """
+
+    def __init__(self, mi: Any, labels: np.ndarray, parts: Sequence[int],
+                 targets: Mapping[int, tuple[np.ndarray, np.ndarray]], exposure: float, std_weight: float):
+        import drjit as dr
+
+        self.mi, self.dr = mi, dr
+        self.parts = list(parts)
+        flat = np.asarray(labels, np.int64).ravel()
+        inside = flat >= 0
+        self.pixels = mi.UInt32(np.flatnonzero(inside).astype(np.uint32))
+        self.labels = mi.UInt32(flat[inside].astype(np.uint32))
+        counts = np.bincount(flat[inside], minlength=len(self.parts)).astype(np.float64)
+        self.counts = mi.Float(np.maximum(counts, 1.0).astype(np.float32))
+        self.shares = mi.Float((counts / max(counts.sum(), 1.0)).astype(np.float32))
+        self.exposure = float(exposure)
+        self.std_weight = float(std_weight)
+        mean = np.array([targets[i][0] for i in self.parts], np.float64)
+        std = np.array([targets[i][1] for i in self.parts], np.float64)
+        level = mean + 0.02
+        self.t_mean = [mi.Float(mean[:, c].astype(np.float32)) for c in range(3)]
+        self.t_std = [mi.Float(std[:, c].astype(np.float32)) for c in range(3)]
+        self.level = [mi.Float(level[:, c].astype(np.float32)) for c in range(3)]
+
+    def __call__(self, image: Any) -> tuple[Any, Any]:
+        """(total, per-part loss as a Float array in `parts` order) of an (H, W, 4) TensorXf render."""
+        mi, dr = self.mi, self.dr
+        size = len(self.parts)
+        per_part = dr.zeros(mi.Float, size)
+        for c in range(3):
+            values = dr.gather(mi.Float, image.array, self.pixels * 4 + c)
+            sums, squares = dr.zeros(mi.Float, size), dr.zeros(mi.Float, size)
+            dr.scatter_add(sums, values, self.labels)
+            dr.scatter_add(squares, values * values, self.labels)
+            mean = sums / self.counts
+            std = dr.sqrt(dr.maximum(squares / self.counts - mean * mean, 1e-10))
+            per_part += dr.square((self.exposure * mean - self.t_mean[c]) / self.level[c]) / 3.0
+            per_part += self.std_weight * dr.square((self.exposure * std - self.t_std[c]) / self.level[c]) / 3.0
+        return dr.sum(per_part * self.shares), per_part
+
+    def means(self, image: Any) -> np.ndarray:
+        """(parts, 3) mean linear colour of each part's region in a render (NumPy, no gradients)."""
+        flat = np.array(image, np.float64).reshape(-1, 4)[:, :3]
+        pixels, labels = np.array(self.pixels, np.int64), np.array(self.labels, np.int64)
+        sums = np.zeros((len(self.parts), 3))
+        np.add.at(sums, labels, flat[pixels])
+        return sums / np.array(self.counts, np.float64)[:, None]
+
+    def values(self, per_part: Any) -> dict[int, float]:
+        return {i: float(v) for i, v in zip(self.parts, np.array(per_part, np.float64).reshape(-1), strict=True)}
+
+
+def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[int], envmap: Any,
+                 exposure: float, settings: RefineSettings = RefineSettings(),
+                 uv_frame: Any = None) -> dict[int, PartRefinement]:
+    """Refine the materials of `parts` (part indices; `materials[i]` is `scene.mesh.parts[i]`'s spec).
+
+    `frame` renders the gradient loop (its own size: the statistics do not need the fit's), `uv_frame`
+    the UV search at `scene`'s size (default `frame`). Parts without a material (built-in), without a
+    photo region or without rendered pixels are left out.
+    """
+    import drjit as dr
+
+    mesh = scene.mesh
+    positions = {p.index: k for k, p in enumerate(mesh.parts)}
+    parts = [i for i in parts if i in positions and materials[positions[i]] is not None and i in scene.masks]
+    if not parts:
+        return {}
+    targets = region_targets(scene.photo_linear, {i: scene.masks[i] for i in parts})
+    uv = uv_search(uv_frame or frame, scene, materials, parts, envmap, exposure, settings)
+    placed = list(materials)
+    for i, ((scale, rotation), _) in uv.items():
+        placed[positions[i]] = with_refinement(materials[positions[i]], Refinement(uv_scale=scale,
+                                                                                    uv_rotation=rotation))
+    ids = frame.render_ids(mesh, scene.camera)
+    regions = {i: erode(ids == i, settings.erode) for i in parts}
+    parts = [i for i in parts if regions[i].sum() >= 4 and i in targets]
+    if not parts:
+        return {}
+    labels = np.full(ids.shape, -1, np.int64)
+    for k, i in enumerate(parts):
+        labels[regions[i]] = k
+    with frame.gradient_scene(mesh, placed, scene.camera, envmap, settings.max_depth) as g:
+        mi = g.mi
+        loss = RegionLoss(mi, labels, parts, targets, exposure, settings.std_weight)
+        opt = mi.ad.Adam(lr=settings.learning_rate)
+        for i in parts:
+            opt[f"tint_{i}"] = mi.Color3f(0.0)
+            opt[f"rough_{i}"] = mi.Float(0.0)
+
+        def render(seed: int) -> Any:
+            tints = {positions[i]: dr.exp(opt[f"tint_{i}"]) for i in parts}
+            rough = {positions[i]: dr.exp(opt[f"rough_{i}"]) for i in parts}
+            return g.render(tints, rough, settings.spp, seed)
+
+        with dr.suspend_grad():  # the loss before, and the warm start
+            image = render(0)
+            before = loss.values(loss(image)[1])
+            for i, mean in zip(parts, loss.means(image), strict=True):
+                opt[f"tint_{i}"] = mi.Color3f(*warm_start(targets[i][0], mean, exposure, settings.tint_range))
+        for iteration in range(1, max(1, settings.iterations) + 1):
+            total, _ = loss(render(iteration))
+            for i in parts:
+                total += settings.roughness_prior * dr.square(opt[f"rough_{i}"])
+            dr.backward(total)
+            opt.step()
+            for i in parts:
+                opt[f"tint_{i}"] = dr.clip(opt[f"tint_{i}"], *log_range(settings.tint_range))
+                opt[f"rough_{i}"] = dr.clip(opt[f"rough_{i}"], *log_range(settings.roughness_range))
+        with dr.suspend_grad():
+            after = loss.values(loss(render(0))[1])
+        out = {}
+        for i in parts:
+            tint = tuple(round(float(math.exp(t)), 6) for t in np.array(opt[f"tint_{i}"], np.float64).reshape(-1)[:3])
+            rough = round(float(math.exp(float(np.array(opt[f"rough_{i}"]).reshape(-1)[0]))), 6)
+            (scale, rotation), uv_cost = uv.get(i, ((1.0, 0.0), {}))
+            out[i] = PartRefinement(Refinement(tint, rough, scale, rotation),  # type: ignore[arg-type]
+                                    before[i], after[i], uv_cost)
+    return out

@@ -1,0 +1,50 @@
+"""The research note's Mitsuba 3.9 claims, checked, and the gradient seam on the beauty pool."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tests.render.conftest import write_png
+
+from photoshape_flow.render import Camera, MaterialSpec
+from photoshape_flow.render.testing import box_part, normalise_to_unit_cube
+
+pytestmark = pytest.mark.render
+
+
+def test_an_8bit_png_loads_without_gradients_unless_format_variant(tmp_path: Path) -> None:
+    pytest.importorskip("mitsuba")
+    from photoshape_flow.render.runtime import ensure_mitsuba
+
+    mi = ensure_mitsuba()
+    png = str(write_png(tmp_path / "t.png", np.full((4, 4, 3), 128, np.uint8)))
+    plain = mi.traverse(mi.load_dict({"type": "bitmap", "filename": png}))
+    variant = mi.traverse(mi.load_dict({"type": "bitmap", "filename": png, "format": "variant"}))
+    assert type(plain["data"]).__name__ == "TensorXu8" and type(variant["data"]).__name__ == "TensorXf"
+    assert type(plain["to_uv"]).__name__ == "ScalarAffineTransform3f"  # a scalar: no gradients
+
+
+def test_gradient_scene_differentiates_the_tint_and_restores_the_pool() -> None:
+    pytest.importorskip("mitsuba")
+    import drjit as dr
+
+    from photoshape_flow.fit.scene import FrameRenderer
+    from photoshape_flow.render import Renderer
+
+    renderer = Renderer()
+    mesh = normalise_to_unit_cube([box_part(1, (0.0, 0.0, 0.0), (0.3, 0.3, 0.3))])
+    camera = Camera(math.radians(30), math.radians(20), 2.4, 45.0)
+    spec = [MaterialSpec("m", params={"albedo": [0.5, 0.5, 0.5], "roughness": 0.5}, scale=None)]
+    frame = FrameRenderer(renderer, 24, 4)
+    before = frame.render(mesh, spec, camera, None)
+    with frame.gradient_scene(mesh, spec, camera, None) as g:
+        tint = g.mi.Color3f(1.0, 1.0, 1.0)
+        dr.enable_grad(tint)
+        image = g.render({0: tint}, {}, spp=4, seed=1)
+        dr.backward(dr.mean(image[..., 0].array))
+        grad = np.array(dr.grad(tint)).reshape(-1)
+    assert grad[0] > 0 and abs(grad[1]) < 1e-6  # red radiance depends on the red tint only
+    np.testing.assert_allclose(frame.render(mesh, spec, camera, None), before, atol=1e-6)
