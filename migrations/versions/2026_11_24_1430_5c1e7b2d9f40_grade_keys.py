@@ -43,7 +43,7 @@ def _backfill(conn: sa.Connection) -> None:
         if key and key.count("/") >= 2:
             published[pair_id] = key.split("/", 1)[1].rsplit("/", 1)[0]
     with Session(bind=conn) as session:
-        keys = assignment_set_keys(session, list(published.items()))
+        keys = assignment_set_keys(session, list(published.items()), with_refinement=False)
     for grade_id, pair_id in grades:
         method_key = published.get(pair_id)
         set_key = keys.get((pair_id, method_key)) if method_key else None
