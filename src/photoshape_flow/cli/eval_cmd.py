@@ -32,13 +32,13 @@ def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
     print_rows(f"headline: {HEADLINE_TITLE}", headline_rows(metrics))
     print_rows(f"headline, {STAGES_TITLE}", stage_rows(metrics))
     table = Table(title="every figure", title_justify="left")
-    for col in ("stage", "method", "metric", "value", "count"):
-        table.add_column(col, justify="right" if col in ("value", "count") else "left", overflow="fold",
-                         no_wrap=col == "metric")  # metric names stay whole; stage and method fold
+    for col in ("stage", "method", "metric", "value", "count", "95% interval"):
+        table.add_column(col, justify="left" if col in ("stage", "method", "metric") else "right", overflow="fold",
+                         no_wrap=col in ("metric", "95% interval"))  # metric names stay whole; stage and method fold
     for row in metrics_table(metrics):
         value = "" if row["value"] is None else f"{row['value']:.4f}"
         count = "" if row["count"] is None else str(row["count"])
-        table.add_row(row["stage"], row["method"], row["metric"], value, count)
+        table.add_row(row["stage"], row["method"], row["metric"], value, count, row["95% interval"])
     console.print(table)
 
 
