@@ -95,7 +95,11 @@ class InferenceConfig:
 class FitConfig:
     """Fit by rendering (`pipeline.fit`): candidates per part, render quality, lighting search, cost weights.
 
-    The weights are hand-set, not yet fitted on validation renders (docs/decisions.md D28).
+    The cost weights and the scores' temperature are fitted per classifier on `calibration_cases`
+    validation renders made to look like aligned product photos (`pipeline.fit_calibration`,
+    docs/decisions.md D34), never on exemplars or evaluation worlds. The four weights below are the
+    hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or no
+    validation render yields a usable case; they also light and expose the calibration's own cases.
     """
 
     top_k: int = 5  # candidates from the current ranking, per part
@@ -112,6 +116,7 @@ class FitConfig:
     gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
+    calibration_cases: int = 48  # validation renders the weights are fitted on (0: the hand-set weights)
 
 
 @dataclass(frozen=True)

@@ -47,3 +47,12 @@ def test_fitted_beats_wrong_weights_on_held_out_cases_and_temperature_alone_help
 def test_unusable_cases_are_refused() -> None:
     with pytest.raises(ValueError):
         fit([Case(np.ones((1, 4)), 0), Case(np.full((3, 4), np.nan), 0)])
+
+
+def test_few_cases_stay_near_the_centre_many_cases_leave_it() -> None:
+    theta = np.array([3.0, 0.0, 2.0, 1.0])
+    centre = np.array([1.0, 0.5, 0.5, 0.3])
+    few = fit(_cases(theta, 4, seed=3), centre=centre, start=centre, l2=50.0).theta
+    many = fit(_cases(theta, 2000, seed=3), centre=centre, start=centre, l2=50.0).theta
+    assert np.linalg.norm(few - centre) < np.linalg.norm(many - centre)
+    assert np.linalg.norm(many - theta) < np.linalg.norm(centre - theta)

@@ -9,9 +9,11 @@ conditional-logit likelihood ``prod_i softmax(-X_i theta)[true_i]`` with ``theta
 
 Only theta is identifiable (scaling w and T together changes nothing), so the fit returns w
 normalised to sum to 1 and T = 1 / sum(theta): the weights say how the evidence is shared, the
-temperature how sharp the posterior is. A small L2 penalty on theta keeps the fit finite when the
-training cases are separable (then the likelihood grows without bound with |theta|). Deterministic:
-L-BFGS-B from a fixed start, no randomness.
+temperature how sharp the posterior is. A small L2 penalty, ``l2 |theta - centre|^2`` added to the
+summed log-likelihood (a Gaussian prior on theta), keeps the fit finite when the training cases are
+separable (then the likelihood grows without bound with |theta|) and, centred on the hand-set
+weights, keeps a fit on a handful of cases near them; with many cases the data dominate.
+Deterministic: L-BFGS-B from a fixed start, no randomness.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from scipy.optimize import minimize, minimize_scalar
 from scipy.special import logsumexp
 
 TERMS = ("color", "contrast", "gradient", "prior")  # the columns of a case's features
-L2 = 1e-3  # penalty on |theta|^2, per case (the mean log-likelihood is penalised)
+L2 = 1.0  # penalty on |theta - centre|^2 against the summed log-likelihood (a prior worth ~1 case)
 
 
 @dataclass(frozen=True)
@@ -86,24 +88,30 @@ def _logits(theta: np.ndarray, x: np.ndarray, pad: np.ndarray) -> np.ndarray:
 
 
 def _objective(theta: np.ndarray, x: np.ndarray, pad: np.ndarray, truth: np.ndarray,
-               l2: float) -> tuple[float, np.ndarray]:
-    """Mean negative log-likelihood of the true candidates plus l2 |theta|^2, and its gradient."""
+               l2: float, centre: np.ndarray | float = 0.0) -> tuple[float, np.ndarray]:
+    """Mean negative log-likelihood of the true candidates plus l2 |theta - centre|^2 / n, and its gradient."""
     logits = _logits(theta, x, pad)
     norm = logsumexp(logits, axis=1)
     rows = np.arange(len(truth))
     p = np.exp(logits - norm[:, None])
     loss = float(np.mean(norm - logits[rows, truth]))
     grad = np.mean(x[rows, truth] - np.einsum("nc,nct->nt", p, x), axis=0)
-    return loss + l2 * float(theta @ theta), grad + 2.0 * l2 * theta
+    shrink = l2 / len(truth)
+    return loss + shrink * float((theta - centre) @ (theta - centre)), grad + 2.0 * shrink * (theta - centre)
 
 
-def fit(cases: Sequence[Case], start: Sequence[float] | None = None, l2: float = L2) -> Fit:
-    """Non-negative weights and a temperature maximising the likelihood of the true candidates."""
+def fit(cases: Sequence[Case], start: Sequence[float] | None = None, l2: float = L2,
+        centre: Sequence[float] | None = None) -> Fit:
+    """Non-negative weights and a temperature maximising the penalised likelihood of the true candidates.
+
+    `centre`: theta the penalty pulls towards (default 0); `start`: where L-BFGS-B starts (default 1s).
+    """
     cases = usable(cases)
     if not cases:
         raise ValueError("no usable calibration case (each needs two candidates and its true one)")
     x0 = np.asarray(start if start is not None else np.ones(len(TERMS)), np.float64)
-    result = minimize(_objective, x0, args=(*_stack(cases), l2), jac=True, method="L-BFGS-B",
+    c = np.zeros(len(TERMS)) if centre is None else np.asarray(centre, np.float64)
+    result = minimize(_objective, x0, args=(*_stack(cases), l2, c), jac=True, method="L-BFGS-B",
                       bounds=[(0.0, None)] * len(TERMS), options={"maxiter": 500, "gtol": 1e-8})
     return Fit.from_theta(np.maximum(result.x, 0.0))
 

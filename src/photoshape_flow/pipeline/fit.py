@@ -57,7 +57,7 @@ from photoshape_flow.vocab import STATUS_OK
 log = logging.getLogger(__name__)
 
 METHOD = "fit"
-CODE_VERSION = "fit-1"
+CODE_VERSION = "fit-2"  # fit-2: fitted weights and temperature (D34)
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
 
 
@@ -70,9 +70,11 @@ class FitSummary:
     rows: int = 0
     lightings: int = 0  # lighting estimates computed (not reused)
     changed: int = 0  # parts whose first material differs from the classifier's
+    weights: dict[str, Any] = field(default_factory=dict)  # the cost weights used: fitted or hand-set (D34)
 
 
 def weights_of(cfg: FitConfig) -> Weights:
+    """The profile's hand-set distance weights (the fallback when no fitted ones are stored)."""
     return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight)
 
 
@@ -117,6 +119,8 @@ class FitContext:
         training = [e for e in envmaps if (e.split or "train") == "train"] or list(envmaps)
         self.envmaps = {e.id: e.blob for e in training}
         self._renderer = renderer
+        # fitted weights and temperature (`pipeline.fit_calibration`, D34); None: the profile's hand-set ones
+        self.calibration: dict[str, Any] | None = None
         self._frame: FrameRenderer | None = None
         self._specs: dict[int, Any] = {}
         self._meshes: dict[int, Any] = {}
@@ -158,13 +162,46 @@ class FitContext:
         return self._meshes[shape.id]
 
     @property
+    def weights(self) -> Weights:
+        """The distance weights in use: the fitted ones when calibrated, else the profile's."""
+        if self.calibration is None:
+            return weights_of(self.cfg)
+        w = self.calibration["weights"]
+        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]))
+
+    @property
+    def prior_weight(self) -> float:
+        return self.cfg.prior_weight if self.calibration is None else float(self.calibration["weights"]["prior"])
+
+    @property
+    def temperature(self) -> float:
+        """The softmax temperature of the rows' scores (1 with the hand-set weights: uncalibrated)."""
+        return 1.0 if self.calibration is None else float(self.calibration["temperature"])
+
+    @property
     def params(self) -> dict[str, Any]:
-        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key}
+        weights = None if self.calibration is None else stable_hash(
+            {k: self.calibration[k] for k in ("weights", "temperature")})
+        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key,
+                "fitted_weights": weights}
 
     def lighting_key(self, reference_pair: int, reference_hash: str | None) -> str:
         """What a stored lighting estimate depends on: its pair and ranking, the envmaps, the config."""
         return stable_hash({**self.params, "pair": reference_pair, "ranking": reference_hash,
                             "envmaps": sorted(self.envmaps.items())})
+
+
+def weights_report(ctx: FitContext) -> dict[str, Any]:
+    """What a run says about its cost: fitted (with the held-out figures) or the profile's hand-set fallback."""
+    w = ctx.weights
+    out: dict[str, Any] = {"source": "hand-set" if ctx.calibration is None else "fitted",
+                           "color": round(w.color, 4), "contrast": round(w.contrast, 4),
+                           "gradient": round(w.gradient, 4), "prior": round(ctx.prior_weight, 4),
+                           "temperature": round(ctx.temperature, 4)}
+    if ctx.calibration is not None:
+        out["cases"] = ctx.calibration.get("cases")
+        out["held_out"] = ctx.calibration.get("held_out")
+    return out
 
 
 def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
@@ -232,11 +269,11 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
         if round_:
             candidates = candidates_of(ctx, data)
             measured, _ = select_materials(ctx, data, candidates, light)
-            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.cfg.prior_weight)[0].candidate.material_id
+            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.prior_weight)[0].candidate.material_id
                                    for i, c in candidates.items() if c}}
         materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
         h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
-                                                    weights_of(ctx.cfg), ctx.cfg.lighting_envmaps, ctx.cfg.erode)
+                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode)
         light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
                  "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
     return light
@@ -304,7 +341,7 @@ def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list
     envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
     renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
     return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
-                                weights_of(ctx.cfg), ctx.cfg.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
+                                ctx.weights, ctx.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
 
 
 def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
@@ -321,8 +358,8 @@ def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candida
                                         substance=row.substance, unobserved=row.unobserved,
                                         params={**(row.params or {}), "fit": {"source": "ranking-only"}}))
             continue
-        ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.cfg.prior_weight)
-        for rank, (item, score) in enumerate(zip(ranked, scores_of(ranked), strict=True), start=1):
+        ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.prior_weight)
+        for rank, (item, score) in enumerate(zip(ranked, scores_of(ranked, ctx.temperature), strict=True), start=1):
             c = item.candidate
             out.append(m.Assignment(
                 **common, rank=rank, material_id=c.material_id, score=score, substance=c.substance, unobserved=False,
@@ -367,6 +404,11 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
         ctx = FitContext(session, store, classifier, cfg, renderer)
         todo = fit_pairs_of(session, ctx.source_key, pair_ids)
     summary = FitSummary(ctx.method_key)
+    if todo:
+        from photoshape_flow.pipeline.fit_calibration import ensure_calibration
+
+        ctx.calibration = ensure_calibration(ctx, settings)
+    summary.weights = weights_report(ctx)
     stage = f"{METHOD}:{ctx.method_key}"
     for pair_id in todo:
         try:
