@@ -97,7 +97,8 @@ class FitConfig:
 
     The cost weights and the scores' temperature are fitted per classifier on `calibration_cases`
     validation renders made to look like aligned product photos (`pipeline.fit_calibration`,
-    docs/decisions.md D34), never on exemplars or evaluation worlds. The four weights below are the
+    docs/decisions.md D34), never on exemplars or evaluation worlds; the blur is the one of
+    `calibration_blurs` with the lowest held-out log-loss on those renders. The four weights and `blur` are the
     hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or no
     validation render yields a usable case; they also light and expose the calibration's own cases.
     """
@@ -117,6 +118,7 @@ class FitConfig:
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
     calibration_cases: int = 48  # validation renders the weights are fitted on (0: the hand-set weights)
+    calibration_blurs: tuple[float, ...] = (0.0, 1.0)  # compared on the same renders (empty: `blur` only)
 
 
 @dataclass(frozen=True)

@@ -74,6 +74,8 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
     assert record is not None and record["renders"] >= 1 and record["cases"] >= 1, stored
     assert report["source"] == "fitted" and report["temperature"] == pytest.approx(record["temperature"], abs=1e-4)
     assert sum(record["weights"].values()) == pytest.approx(1.0, abs=1e-4)
+    assert record["blur"] in (0.0, 1.0) and report["blur"] == record["blur"]  # the chosen blur is the stage's
+    assert set(record["by_blur"]) <= {"0.0", "1.0"} and str(record["blur"]) in record["by_blur"]
     assert all(w >= 0 for w in record["weights"].values())
 
     rows = _fit_rows(db_url)

@@ -174,6 +174,11 @@ class FitContext:
         return self.cfg.prior_weight if self.calibration is None else float(self.calibration["weights"]["prior"])
 
     @property
+    def blur(self) -> float:
+        """The blur in use: the one the calibration chose among `fit.calibration_blurs`, else `fit.blur`."""
+        return self.cfg.blur if self.calibration is None else float(self.calibration.get("blur", self.cfg.blur))
+
+    @property
     def temperature(self) -> float:
         """The softmax temperature of the rows' scores (1 with the hand-set weights: uncalibrated)."""
         return 1.0 if self.calibration is None else float(self.calibration["temperature"])
@@ -181,7 +186,7 @@ class FitContext:
     @property
     def params(self) -> dict[str, Any]:
         weights = None if self.calibration is None else stable_hash(
-            {k: self.calibration[k] for k in ("weights", "temperature")})
+            {k: self.calibration.get(k) for k in ("weights", "temperature", "blur")})
         return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key,
                 "fitted_weights": weights}
 
@@ -197,7 +202,7 @@ def weights_report(ctx: FitContext) -> dict[str, Any]:
     out: dict[str, Any] = {"source": "hand-set" if ctx.calibration is None else "fitted",
                            "color": round(w.color, 4), "contrast": round(w.contrast, 4),
                            "gradient": round(w.gradient, 4), "prior": round(ctx.prior_weight, 4),
-                           "temperature": round(ctx.temperature, 4)}
+                           "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
     if ctx.calibration is not None:
         out["cases"] = ctx.calibration.get("cases")
         out["held_out"] = ctx.calibration.get("held_out")
@@ -235,7 +240,7 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
         source_hash = row.params_hash
     observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.blur,
                                 foreground=foreground)
     return PairData(pair, scene, rows, source_hash)
 

@@ -16,7 +16,9 @@ under val envmaps, true material of every part known from its spec) becomes a ca
    `render_candidates`, `select_with_exposure`) with the profile's hand-set weights, at the render's
    camera; each observed part whose true material is among its candidates is one `fit.calibrate.Case`.
 
-The weights and temperature are fitted on all cases (`fit.calibrate.fit`) and stored in the
+Each blur of `fit.calibration_blurs` measures the same renders (rendered once, `CachedFrame`); the
+blur with the lowest cross-validated log-loss is kept. The weights and temperature are fitted on
+all its cases (`fit.calibrate.fit`, centred on the hand-set weights) and stored in the
 classifier's `metrics["fit_calibration"]` with a key of everything they depend on (code, fit config,
 checkpoint, the sampled renders, enabled materials, training envmaps, seed), like the D24
 calibrations; `run_fit` computes them when the key changed and the stage then ranks with them. Two
@@ -27,6 +29,8 @@ the hand-set cost, the hand-set cost with a fitted temperature, and the fitted c
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import logging
 import time
 from collections.abc import Sequence
@@ -40,7 +44,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import calibrate as cal
-from photoshape_flow.fit.scene import FitScene, candidate_terms, render_candidates, select_with_exposure
+from photoshape_flow.fit.scene import FitScene, FrameRenderer, candidate_terms, render_candidates, select_with_exposure
 from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.vocab import STATUS_OK
@@ -50,6 +54,34 @@ log = logging.getLogger(__name__)
 CODE_VERSION = "fit-calibration-1"
 METRICS_KEY = "fit_calibration"  # classifier.metrics entry
 KINDS = ("training", "bootstrap")  # both rounds' val renders: val shapes under val envmaps
+
+
+class CachedFrame(FrameRenderer):
+    """A `FrameRenderer` that renders each (mesh, materials, camera, envmap) once per render case.
+
+    Comparing blurs re-runs a case's lighting and candidate loops on the same renders (the blur only
+    post-processes them, `FitScene.render`), so the second blur costs statistics, not renders.
+    """
+
+    def __init__(self, frame: FrameRenderer):
+        super().__init__(frame.renderer, frame.size, frame.spp)
+        self._cache: dict[str, np.ndarray] = {}
+
+    def clear(self) -> None:
+        self._cache = {}
+
+    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
+        key = repr((id(mesh), list(materials), camera, envmap))
+        if key not in self._cache:
+            self._cache[key] = super().render(mesh, materials, camera, envmap)
+        return self._cache[key]
+
+
+def with_blur(ctx: Any, blur: float) -> Any:
+    """A shallow copy of a fit context whose config has `blur` (the frame, meshes and specs shared)."""
+    other = copy.copy(ctx)
+    other.cfg = dataclasses.replace(ctx.cfg, blur=float(blur))
+    return other
 
 
 def validation_renders(session: sa.orm.Session, count: int, seed: int) -> list[m.Rendering]:
@@ -194,8 +226,6 @@ def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:
 
 def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int) -> str:
     """What a stored calibration depends on (a change of any re-fits it)."""
-    import dataclasses
-
     return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
                         "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed,
                         "renders": [[r.kind, r.key, r.params_hash] for r in renders],
@@ -203,36 +233,72 @@ def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int) -> str:
 
 
 def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering]) -> dict[str, Any] | None:
-    """The calibration record of `renders` (see the module docstring); None when no usable case came out."""
+    """The calibration record of `renders` (see the module docstring); None when no usable case came out.
+
+    Every blur of `fit.calibration_blurs` (or `fit.blur` alone) builds its cases from the same
+    renders; the blur whose fitted cost has the lowest cross-validated log-loss is kept (in-sample
+    log-loss when a fold is empty), and the weights and temperature are refitted on all its cases.
+    """
     started = time.perf_counter()
     ranker = RenderRanker(ctx, settings)
-    cases: list[cal.Case] = []
+    plain = ctx.frame
+    frame = CachedFrame(plain)
+    ctx._frame = frame  # the blur contexts below share it; the stage gets the plain one back
+    try:
+        return _fit_cases(ctx, settings, renders, ranker, frame, started)
+    finally:
+        ctx._frame = plain
+
+
+def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ranker: RenderRanker,
+               frame: CachedFrame, started: float) -> dict[str, Any] | None:
+    """`fit_calibration`'s loop over renders and blurs, then the fit of the best blur."""
+    blurs = tuple(dict.fromkeys(float(b) for b in (ctx.cfg.calibration_blurs or (ctx.cfg.blur,))))
+    contexts = {b: with_blur(ctx, b) for b in blurs}
+    cases: dict[float, list[cal.Case]] = {b: [] for b in blurs}
     counts = {"renders": 0, "parts": 0, "true_in_candidates": 0, "failed": 0}
     for row in renders:
+        frame.clear()
         try:
-            found, n = render_cases(ctx, ranker, row, settings)
+            found = {b: render_cases(contexts[b], ranker, row, settings) for b in blurs}
         except (ValueError, OSError) as exc:  # one unreadable or invisible render never stops the fit
             log.warning("fit calibration: %s/%s skipped: %s", row.kind, row.key, exc)
             counts["failed"] += 1
             continue
-        cases += found
+        for b, (got, _) in found.items():
+            cases[b] += got
+        n = found[blurs[0]][1]
         counts["renders"] += 1
         counts["parts"] += n["parts"]
         counts["true_in_candidates"] += n["true_in_candidates"]
-    cases = cal.usable(cases)
-    if not cases:
+    frame.clear()
+    base = hand_set(ctx.cfg)
+    by_blur: dict[str, Any] = {}
+    best: tuple[float, float] | None = None  # (log-loss, blur)
+    for b in blurs:
+        usable = cal.usable(cases[b])
+        if not usable:
+            continue
+        checked = held_out(usable, ctx.cfg)
+        loss = (checked["fitted"]["log_loss"] if checked.get("cases")
+                else cal.score(cal.fit(usable, start=base, centre=base).theta, usable).log_loss)
+        by_blur[str(b)] = {"cases": len(usable), "held_out": checked}
+        if best is None or loss < best[0]:
+            best = (loss, b)
+    if best is None:
         log.warning("fit calibration: no usable case in %d validation renders; hand-set weights", len(renders))
         return None
-    fitted = cal.fit(cases, start=hand_set(ctx.cfg), centre=hand_set(ctx.cfg))
+    blur = best[1]
+    fitted = cal.fit(cal.usable(cases[blur]), start=base, centre=base)
     if not np.isfinite(fitted.temperature):
         log.warning("fit calibration: no term carries information on these cases; hand-set weights")
         return None
     record = {"weights": dict(zip(cal.TERMS, (round(w, 6) for w in fitted.weights), strict=True)),
-              "temperature": round(fitted.temperature, 6), "cases": len(cases), **counts,
-              "held_out": held_out(cases, ctx.cfg), "seconds": round(time.perf_counter() - started, 2)}
-    log.info("fit calibration (classifier %s): weights %s, temperature %.3f on %d cases from %d renders "
-             "(%.1f s); held out: %s", ctx.classifier.id, record["weights"], fitted.temperature, len(cases),
-             counts["renders"], record["seconds"], record["held_out"])
+              "temperature": round(fitted.temperature, 6), "blur": blur, **by_blur[str(blur)], **counts,
+              "by_blur": by_blur, "seconds": round(time.perf_counter() - started, 2)}
+    log.info("fit calibration (classifier %s): blur %s, weights %s, temperature %.3f on %d cases from %d renders "
+             "(%.1f s); held out: %s", ctx.classifier.id, blur, record["weights"], fitted.temperature,
+             record["cases"], counts["renders"], record["seconds"], record["held_out"])
     return record
 
 
