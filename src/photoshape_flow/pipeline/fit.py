@@ -412,8 +412,12 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
     if todo:
         from photoshape_flow.pipeline.fit_calibration import ensure_calibration
 
-        ctx.calibration = ensure_calibration(ctx, settings)
-    summary.weights = weights_report(ctx)
+        try:
+            ctx.calibration = ensure_calibration(ctx, settings)
+        except Exception as exc:  # the hand-set weights still rank; the report and the log say why
+            log.warning("fit: calibration failed (%s: %s); hand-set weights", type(exc).__name__, exc)
+            summary.weights["error"] = f"{type(exc).__name__}: {exc}"[:500]
+    summary.weights = {**weights_report(ctx), **summary.weights}
     stage = f"{METHOD}:{ctx.method_key}"
     for pair_id in todo:
         try:
