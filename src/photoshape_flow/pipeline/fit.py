@@ -11,7 +11,9 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    of every substance, every enabled material the classifier was not trained on.
 3. Renders (`fit.select.render_slots`): render j puts each part's j-th candidate on it, at the pair's
    camera in the exemplar's frame; each part's render region is compared with the photo's aligned
-   region (`fit.appearance.distance`), and the cost adds the ranking prior.
+   region (`fit.appearance.distance`), and the cost adds the ranking prior. The weights, the
+   scores' temperature and the blur are fitted per classifier on validation renders
+   (`pipeline.fit_calibration`, D34) before the first pair; the profile's hand-set ones are the fallback.
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
    classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
 
