@@ -23,7 +23,8 @@ from photoshape_flow.pipeline.fit import run_fit
 from photoshape_flow.profiles import resolve_profile
 
 VARIANTS = {
-    "default": [],
+    "default": [],  # weights and temperature fitted on validation renders (D34)
+    "hand-set": ["fit.calibration_cases=0"],  # the profile's weights (D32), temperature 1
     "blur0": ["fit.blur=0"],
     "no-exposure-rounds": ["fit.exposure_rounds=0"],
     "no-prior": ["fit.prior_weight=0"],
@@ -53,8 +54,8 @@ def main() -> None:
         figures = {f"{x.method} {x.metric}": [round(x.value, 4) if x.value is not None else None, x.count]
                    for x in metrics if x.metric in FIGURES and x.method.split(":")[0] in ("fit", "classifier")}
         results[name] = {"overrides": overrides, "pairs": summary.pairs_done, "seconds": round(seconds, 1),
-                         "figures": figures}
-        print(name, overrides, f"{summary.pairs_done} pairs in {seconds:.1f} s")
+                         "weights": summary.weights, "figures": figures}
+        print(name, overrides, f"{summary.pairs_done} pairs in {seconds:.1f} s", summary.weights)
         for key, (value, count) in sorted(figures.items()):
             print(f"  {key:40s} {value} ({count} parts)")
     out = results_dir(settings, "fit_by_rendering")

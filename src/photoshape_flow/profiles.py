@@ -95,7 +95,12 @@ class InferenceConfig:
 class FitConfig:
     """Fit by rendering (`pipeline.fit`): candidates per part, render quality, lighting search, cost weights.
 
-    The weights are hand-set, not yet fitted on validation renders (docs/decisions.md D28).
+    The cost weights and the scores' temperature are fitted per classifier on `calibration_cases`
+    validation renders made to look like aligned product photos (`pipeline.fit_calibration`,
+    docs/decisions.md D34), never on exemplars or evaluation worlds; the blur is the one of
+    `calibration_blurs` with the lowest held-out log-loss on those renders. The four weights and `blur` are the
+    hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or no
+    validation render yields a usable case; they also light and expose the calibration's own cases.
     """
 
     top_k: int = 5  # candidates from the current ranking, per part
@@ -119,6 +124,8 @@ class FitConfig:
     refine_iterations: int = 8  # Adam steps (after a closed-form warm start) on the tint and roughness scale
     refine_spp: int = 4  # per gradient render (a new seed each step) and per UV-search render
     refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
+    calibration_cases: int = 48  # validation renders the weights are fitted on (0: the hand-set weights)
+    calibration_blurs: tuple[float, ...] = (0.0, 1.0)  # compared on the same renders (empty: `blur` only)
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)

@@ -10,7 +10,8 @@ a few pixels, the shape is only a look-alike), so the distance compares distribu
 
 Each term is divided by a fixed scale (a just-noticeable CIELAB difference of about 10 for colour,
 5 L* units per pixel for gradients) so the weights of `Weights` are comparable; the weights are
-profile fields (`FitConfig`), not fitted yet (docs/decisions.md D32). Masks are eroded first so
+fitted on validation renders per classifier (`fit.calibrate`, docs/decisions.md D34), with the
+profile's hand-set values (`FitConfig`, D32) as the fallback. Masks are eroded first so
 boundary pixels, where the alignment error and anti-aliasing live, do not count.
 """
 
@@ -107,9 +108,22 @@ def appearance(lab: np.ndarray, mask: np.ndarray) -> Appearance | None:
     return Appearance(pixels.mean(axis=0), pixels.std(axis=0), gradient, n)
 
 
+def terms(a: Appearance, b: Appearance) -> np.ndarray:
+    """The three unweighted distance terms (colour, contrast, gradient), each over its fixed scale.
+
+    Kept apart so the weights can be fitted on validation renders (`fit.calibrate`).
+    """
+    return np.array([float(np.linalg.norm(a.lab_mean - b.lab_mean)) / LAB_SCALE,
+                     float(np.linalg.norm(a.lab_std - b.lab_std)) / LAB_SCALE,
+                     float(np.linalg.norm(a.gradient - b.gradient)) / GRADIENT_SCALE])
+
+
+def weigh(values: np.ndarray, weights: Weights) -> float:
+    """The weighted sum of `terms`."""
+    color, contrast, gradient = (float(v) for v in values)
+    return weights.color * color + weights.contrast * contrast + weights.gradient * gradient
+
+
 def distance(a: Appearance, b: Appearance, weights: Weights = Weights()) -> float:
     """Weighted distance between two regions' statistics (0: identical statistics)."""
-    color = float(np.linalg.norm(a.lab_mean - b.lab_mean)) / LAB_SCALE
-    contrast = float(np.linalg.norm(a.lab_std - b.lab_std)) / LAB_SCALE
-    gradient = float(np.linalg.norm(a.gradient - b.gradient)) / GRADIENT_SCALE
-    return weights.color * color + weights.contrast * contrast + weights.gradient * gradient
+    return weigh(terms(a, b), weights)

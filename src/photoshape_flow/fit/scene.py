@@ -19,7 +19,7 @@ import numpy as np
 
 from photoshape_flow.align.partmap import resize_labels, zoom_to_fit
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Appearance, Weights, appearance, distance, erode, soften, to_lab
+from photoshape_flow.fit.appearance import Appearance, Weights, appearance, erode, soften, terms, to_lab, weigh
 from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.select import render_slots
 from photoshape_flow.imaging.squares import crop_square, square_box
@@ -124,14 +124,21 @@ class FitScene:
         return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
 
 
+def region_terms(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appearance], indices: Sequence[int],
+                 erode_pixels: int = 1) -> dict[int, np.ndarray | None]:
+    """Per part: the distance terms of its rendered region to its photo region (None when either is missing)."""
+    out: dict[int, np.ndarray | None] = {}
+    for index in indices:
+        rendered = appearance(lab, erode(ids == index, erode_pixels))
+        out[index] = None if rendered is None or index not in photo else terms(rendered, photo[index])
+    return out
+
+
 def region_distances(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appearance], indices: Sequence[int],
                      weights: Weights, erode_pixels: int = 1) -> dict[int, float | None]:
     """Per part: distance of its rendered region to its photo region (None when either is missing)."""
-    out: dict[int, float | None] = {}
-    for index in indices:
-        rendered = appearance(lab, erode(ids == index, erode_pixels))
-        out[index] = None if rendered is None or index not in photo else distance(rendered, photo[index], weights)
-    return out
+    return {i: None if t is None else weigh(t, weights)
+            for i, t in region_terms(lab, ids, photo, indices, erode_pixels).items()}
 
 
 def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
@@ -222,19 +229,26 @@ def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, 
     return out
 
 
-def candidate_distances(renders: CandidateRenders, scene: FitScene, exposure: float, weights: Weights,
-                        erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
-    """Part index -> {candidate material: distance to the photo} with the renders at `exposure`."""
+def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float,
+                    erode_pixels: int = 1) -> dict[int, dict[int, np.ndarray | None]]:
+    """Part index -> {candidate material: its distance terms to the photo} with the renders at `exposure`."""
     photo = scene.photo_stats
-    out: dict[int, dict[int, float | None]] = {i: {} for i in renders.where}
+    out: dict[int, dict[int, np.ndarray | None]] = {i: {} for i in renders.where}
     for k, linear in enumerate(renders.renders):
         shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
         if not shown:
             continue
         lab = to_lab(lt.exposed_srgb(linear, exposure))
-        for index, value in region_distances(lab, renders.ids, photo, sorted(shown), weights, erode_pixels).items():
+        for index, value in region_terms(lab, renders.ids, photo, sorted(shown), erode_pixels).items():
             out[index][shown[index]] = value
     return out
+
+
+def candidate_distances(renders: CandidateRenders, scene: FitScene, exposure: float, weights: Weights,
+                        erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
+    """Part index -> {candidate material: distance to the photo} with the renders at `exposure`."""
+    return {i: {mid: None if t is None else weigh(t, weights) for mid, t in by.items()}
+            for i, by in candidate_terms(renders, scene, exposure, erode_pixels).items()}
 
 
 def select_with_exposure(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],

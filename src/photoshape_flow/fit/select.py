@@ -42,11 +42,16 @@ def rank_candidates(candidates: Sequence[Candidate], distances: Mapping[int, flo
     return sorted(scored, key=lambda s: s.cost)
 
 
-def scores_of(ranked: Sequence[Scored]) -> list[float]:
-    """exp(-cost) normalised over the part's candidates: a score where higher is better, like the ranking's."""
+def scores_of(ranked: Sequence[Scored], temperature: float = 1.0) -> list[float]:
+    """exp(-cost / temperature) normalised over the part's candidates: a score where higher is better.
+
+    With the temperature fitted on validation renders (`fit.calibrate`) the score is a calibrated
+    posterior over the candidates; an infinite temperature (no evidence) makes them uniform.
+    """
     if not ranked:
         return []
     low = min(s.cost for s in ranked)
-    weights = [math.exp(-(s.cost - low)) for s in ranked]
+    t = max(float(temperature), 1e-9)
+    weights = [math.exp(-(s.cost - low) / t) for s in ranked]
     total = sum(weights)
     return [w / total for w in weights]

@@ -11,7 +11,9 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    of every substance, every enabled material the classifier was not trained on.
 3. Renders (`fit.select.render_slots`): render j puts each part's j-th candidate on it, at the pair's
    camera in the exemplar's frame; each part's render region is compared with the photo's aligned
-   region (`fit.appearance.distance`), and the cost adds the ranking prior.
+   region (`fit.appearance.distance`), and the cost adds the ranking prior. The weights, the
+   scores' temperature and the blur are fitted per classifier on validation renders
+   (`pipeline.fit_calibration`, D34) before the first pair; the profile's hand-set ones are the fallback.
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
    classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
 5. Refinement (`pipeline.fit_refine`, `fit.refine`) of the winners of the pairs that are used
@@ -61,7 +63,7 @@ from photoshape_flow.vocab import STATUS_OK
 log = logging.getLogger(__name__)
 
 METHOD = "fit"
-CODE_VERSION = "fit-1"
+CODE_VERSION = "fit-2"  # fit-2: fitted weights and temperature (D34)
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
 
 
@@ -75,9 +77,11 @@ class FitSummary:
     lightings: int = 0  # lighting estimates computed (not reused)
     changed: int = 0  # parts whose first material differs from the classifier's
     refined: int = 0  # parts whose winner was refined (`pipeline.fit_refine`)
+    weights: dict[str, Any] = field(default_factory=dict)  # the cost weights used: fitted or hand-set (D34)
 
 
 def weights_of(cfg: FitConfig) -> Weights:
+    """The profile's hand-set distance weights (the fallback when no fitted ones are stored)."""
     return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight)
 
 
@@ -122,6 +126,8 @@ class FitContext:
         training = [e for e in envmaps if (e.split or "train") == "train"] or list(envmaps)
         self.envmaps = {e.id: e.blob for e in training}
         self._renderer = renderer
+        # fitted weights and temperature (`pipeline.fit_calibration`, D34); None: the profile's hand-set ones
+        self.calibration: dict[str, Any] | None = None
         self._frame: FrameRenderer | None = None
         self._specs: dict[int, Any] = {}
         self._meshes: dict[int, Any] = {}
@@ -163,13 +169,51 @@ class FitContext:
         return self._meshes[shape.id]
 
     @property
+    def weights(self) -> Weights:
+        """The distance weights in use: the fitted ones when calibrated, else the profile's."""
+        if self.calibration is None:
+            return weights_of(self.cfg)
+        w = self.calibration["weights"]
+        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]))
+
+    @property
+    def prior_weight(self) -> float:
+        return self.cfg.prior_weight if self.calibration is None else float(self.calibration["weights"]["prior"])
+
+    @property
+    def blur(self) -> float:
+        """The blur in use: the one the calibration chose among `fit.calibration_blurs`, else `fit.blur`."""
+        return self.cfg.blur if self.calibration is None else float(self.calibration.get("blur", self.cfg.blur))
+
+    @property
+    def temperature(self) -> float:
+        """The softmax temperature of the rows' scores (1 with the hand-set weights: uncalibrated)."""
+        return 1.0 if self.calibration is None else float(self.calibration["temperature"])
+
+    @property
     def params(self) -> dict[str, Any]:
-        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key}
+        weights = None if self.calibration is None else stable_hash(
+            {k: self.calibration.get(k) for k in ("weights", "temperature", "blur")})
+        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key,
+                "fitted_weights": weights}
 
     def lighting_key(self, reference_pair: int, reference_hash: str | None) -> str:
         """What a stored lighting estimate depends on: its pair and ranking, the envmaps, the config."""
         return stable_hash({**self.params, "pair": reference_pair, "ranking": reference_hash,
                             "envmaps": sorted(self.envmaps.items())})
+
+
+def weights_report(ctx: FitContext) -> dict[str, Any]:
+    """What a run says about its cost: fitted (with the held-out figures) or the profile's hand-set fallback."""
+    w = ctx.weights
+    out: dict[str, Any] = {"source": "hand-set" if ctx.calibration is None else "fitted",
+                           "color": round(w.color, 4), "contrast": round(w.contrast, 4),
+                           "gradient": round(w.gradient, 4), "prior": round(ctx.prior_weight, 4),
+                           "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
+    if ctx.calibration is not None:
+        out["cases"] = ctx.calibration.get("cases")
+        out["held_out"] = ctx.calibration.get("held_out")
+    return out
 
 
 def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
@@ -203,7 +247,7 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
         source_hash = row.params_hash
     observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.blur,
                                 foreground=foreground)
     return PairData(pair, scene, rows, source_hash)
 
@@ -237,11 +281,11 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
         if round_:
             candidates = candidates_of(ctx, data)
             measured, _ = select_materials(ctx, data, candidates, light)
-            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.cfg.prior_weight)[0].candidate.material_id
+            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.prior_weight)[0].candidate.material_id
                                    for i, c in candidates.items() if c}}
         materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
         h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
-                                                    weights_of(ctx.cfg), ctx.cfg.lighting_envmaps, ctx.cfg.erode)
+                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode)
         light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
                  "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
     return light
@@ -311,7 +355,7 @@ def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list
     envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
     renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
     return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
-                                weights_of(ctx.cfg), ctx.cfg.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
+                                ctx.weights, ctx.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
 
 
 def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
@@ -328,8 +372,8 @@ def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candida
                                         substance=row.substance, unobserved=row.unobserved,
                                         params={**(row.params or {}), "fit": {"source": "ranking-only"}}))
             continue
-        ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.cfg.prior_weight)
-        for rank, (item, score) in enumerate(zip(ranked, scores_of(ranked), strict=True), start=1):
+        ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.prior_weight)
+        for rank, (item, score) in enumerate(zip(ranked, scores_of(ranked, ctx.temperature), strict=True), start=1):
             c = item.candidate
             out.append(m.Assignment(
                 **common, rank=rank, material_id=c.material_id, score=score, substance=c.substance, unobserved=False,
@@ -374,6 +418,15 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
         ctx = FitContext(session, store, classifier, cfg, renderer)
         todo = fit_pairs_of(session, ctx.source_key, pair_ids)
     summary = FitSummary(ctx.method_key)
+    if todo:
+        from photoshape_flow.pipeline.fit_calibration import ensure_calibration
+
+        try:
+            ctx.calibration = ensure_calibration(ctx, settings)
+        except Exception as exc:  # the hand-set weights still rank; the report and the log say why
+            log.warning("fit: calibration failed (%s: %s); hand-set weights", type(exc).__name__, exc)
+            summary.weights["error"] = f"{type(exc).__name__}: {exc}"[:500]
+    summary.weights = {**weights_report(ctx), **summary.weights}
     stage = f"{METHOD}:{ctx.method_key}"
     for pair_id in todo:
         try:

@@ -35,6 +35,6 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
         details={summary.method_key or "fit": {"pairs": summary.pairs_done, "rows": summary.rows,
                                                "parts_changed": summary.changed, "parts_refined": summary.refined,
-                                               "lightings": summary.lightings,
+                                               "lightings": summary.lightings, "weights": summary.weights,
                                                "failed": summary.pairs_failed[:20]}},
     )

@@ -1,0 +1,98 @@
+"""Fit weights fitted on validation renders: stored on the classifier, used by the stage, in its params hash.
+
+The tiny demo's photos planted as pairs (`test_fit._plant_pairs`), a random-weight classifier
+checkpoint on the planted classifier row (the ranker's plumbing, not its accuracy, is under test), and
+a few bootstrap-round renders, half of them validation renders, as the calibration's cases.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sqlalchemy as sa
+
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.store import BlobStore
+
+pytestmark = [pytest.mark.slow, pytest.mark.render]
+
+
+def _give_checkpoint(store: BlobStore) -> None:
+    """A random-weight checkpoint over the planted classifier's materials (so the ranker can run)."""
+    import torch
+
+    from photoshape_flow.classify.checkpoint import make_checkpoint, slim, to_bytes
+    from photoshape_flow.classify.resnet import MaterialResNet
+
+    with session_scope() as session:
+        row = session.execute(sa.select(m.Classifier)).scalar_one()
+        subs = [session.get(m.Material, mid).substance for mid in row.materials]
+        torch.manual_seed(0)
+        model = MaterialResNet("resnet18", num_materials=len(row.materials), width=8)
+        checkpoint = make_checkpoint(model, materials=list(row.materials), material_substances=subs, image_size=32,
+                                     config={}, epoch=1)
+        row.checkpoint_blob = store.put_bytes(to_bytes(slim(checkpoint)), "pt")
+
+
+def _fit_rows(url: str) -> dict[tuple[int, int], list[m.Assignment]]:
+    with session_scope(url) as session:
+        rows = session.execute(sa.select(m.Assignment).where(m.Assignment.method == "fit")
+                               .order_by(m.Assignment.pair_id, m.Assignment.part_id, m.Assignment.rank)).scalars()
+        out: dict[tuple[int, int], list[m.Assignment]] = {}
+        for r in rows:
+            out.setdefault((r.pair_id, r.part_id), []).append(r)
+        return out
+
+
+def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str, store: BlobStore) -> None:
+    from tests.pipeline.test_fit import _plant_pairs
+
+    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY
+    from photoshape_flow.pipeline.training_renders import run_training_renders
+    from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.stages import StageContext
+    from photoshape_flow.stages.run import run_stage
+
+    _plant_pairs(tiny_demo, db_url, store)
+    _give_checkpoint(store)
+    summary = run_training_renders("bootstrap", 6, 48, 4, val_fraction=0.5)
+    assert summary["splits"]["val"] >= 2, summary
+    ctx = StageContext.create()
+
+    hand = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=0"]), ctx)
+    assert hand.details[next(iter(hand.details))]["weights"]["source"] == "hand-set"
+    hand_rows = _fit_rows(db_url)
+    fitted = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=3"]), ctx)
+    report = fitted.details[next(iter(fitted.details))]["weights"]
+    with session_scope(db_url) as session:
+        stored = session.execute(sa.select(m.Classifier)).scalar_one().metrics[METRICS_KEY]
+    record = stored["record"]
+    assert record is not None and record["renders"] >= 1 and record["cases"] >= 1, stored
+    assert report["source"] == "fitted" and report["temperature"] == pytest.approx(record["temperature"], abs=1e-4)
+    assert sum(record["weights"].values()) == pytest.approx(1.0, abs=1e-4)
+    assert record["blur"] in (0.0, 1.0) and report["blur"] == record["blur"]  # the chosen blur is the stage's
+    assert set(record["by_blur"]) <= {"0.0", "1.0"} and str(record["blur"]) in record["by_blur"]
+    assert all(w >= 0 for w in record["weights"].values())
+
+    rows = _fit_rows(db_url)
+    assert fitted.done == len({pair for pair, _ in rows})  # the weights' hash re-ran every pair
+    assert {r[0].params_hash for r in rows.values()}.isdisjoint({r[0].params_hash for r in hand_rows.values()})
+    # the stored weights are the ones ranking: scores are softmax(-cost / fitted temperature)
+    w, t = record["weights"], record["temperature"]
+    observed = [ranked for ranked in rows.values() if ranked[0].params["fit"].get("cost") is not None]
+    assert observed
+    for ranked in observed:
+        fit = [r.params["fit"] for r in ranked]
+        for f in fit:
+            if f["distance"] is not None:
+                assert f["cost"] == pytest.approx(f["distance"] + w["prior"] * -math.log(f["prior"]), abs=1e-4)
+        low = min(f["cost"] for f in fit)
+        expected = np.exp(-(np.array([f["cost"] for f in fit]) - low) / t)
+        assert np.allclose([r.score for r in ranked], expected / expected.sum(), atol=1e-3)
+
+    again = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=3"]), ctx)
+    assert again.done == 0  # the stored calibration is reused (same key), nothing re-fits or re-ranks
