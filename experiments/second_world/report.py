@@ -113,8 +113,25 @@ def albedo_delta_e(session: Any, store: BlobStore, raw: dict[str, Any], truths: 
             continue
         delta = float(np.linalg.norm(material_lab[a.material_id] - shown[exemplar.id][truth[0]]))
         obs[a.method_key][exemplar.id].append(delta)
+        if a.refinement and a.refinement.get("tint"):  # the same parts before and after refinement
+            tinted = tinted_lab(session, store, a.material_id, a.refinement["tint"])
+            if tinted is not None:
+                obs[f"{a.method_key} refined parts, before"][exemplar.id].append(delta)
+                after = float(np.linalg.norm(tinted - shown[exemplar.id][truth[0]]))
+                obs[f"{a.method_key} refined parts, after"][exemplar.id].append(after)
     return [{"method": k, "albedo_delta_e": fmt(mean_interval(v)), "parts": mean_interval(v).count}
             for k, v in sorted(obs.items())]
+
+
+def tinted_lab(session: Any, store: BlobStore, material_id: int, tint: list[float]) -> np.ndarray | None:
+    """Mean-albedo CIELAB of a material whose base colour is multiplied (linearly) by a refinement's tint."""
+    albedo = (session.get(m.Material, material_id).maps or {}).get("albedo")
+    if not albedo or not store.exists(albedo):
+        return None
+    srgb = store.load_image(albedo)[..., :3].astype(np.float64) / 255.0
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4) * np.asarray(tint, np.float64)
+    back = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.clip(linear, 0, None) ** (1 / 2.4) - 0.055)
+    return np.asarray(mean_lab((np.clip(back, 0, 1) * 255.0).round().astype(np.uint8)))
 
 
 def markdown(rows: list[dict], columns: list[str]) -> str:

@@ -193,7 +193,7 @@ PROFILES: dict[str, Profile] = {
         training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
         fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=6,
-                      refine_size=48),
+                      refine_size=48, calibration_cases=6),  # a smoke profile: the calibration runs, briefly
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
     ),
     "small": Profile(

@@ -99,9 +99,12 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
     truth_of, untrained = _plant_pairs(tiny_demo, db_url, store)
     pairs = {p for p, _ in truth_of}
     assert len(pairs) >= 2
-    ctx = StageContext.create()
+    calls: list[tuple[str, int, int]] = []
+    ctx = StageContext.create(progress=lambda task, done, total: calls.append((task, done, total)))
     first = run_stage("fit", "tiny", ctx)
     assert (first.done, first.skipped, first.failed) == (len(pairs) + 1, 0, 0)
+    fit_calls = [c for c in calls if c[0] == "fit pairs"]  # the CLI's bar and the flows' artifact
+    assert fit_calls[0] == ("fit pairs", 0, len(pairs) + 1) and fit_calls[-1][1] == len(pairs) + 1
     with session_scope(db_url) as session:
         blind = session.execute(sa.select(m.Pair).where(m.Pair.exemplar_rank == 0)).scalar_one()
         copied = session.execute(sa.select(m.Assignment).where(m.Assignment.pair_id == blind.id,

@@ -66,7 +66,11 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
     hand = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=0"]), ctx)
     assert hand.details[next(iter(hand.details))]["weights"]["source"] == "hand-set"
     hand_rows = _fit_rows(db_url)
+    calls: list[tuple[str, int, int]] = []
+    ctx = StageContext.create(progress=lambda task, done, total: calls.append((task, done, total)))
     fitted = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=3"]), ctx)
+    bar = [c for c in calls if c[0] == "fit calibration renders"]
+    assert bar[0][1] == 0 and bar[-1][1] == bar[-1][2] >= 2  # announced, then counted to its end
     report = fitted.details[next(iter(fitted.details))]["weights"]
     with session_scope(db_url) as session:
         stored = session.execute(sa.select(m.Classifier)).scalar_one().metrics[METRICS_KEY]

@@ -57,6 +57,7 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.fit_refine import is_refined, refine_rows
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
 from photoshape_flow.profiles import FitConfig
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -405,7 +406,7 @@ def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | No
 
 
 def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: Settings | None = None,
-            renderer: Any = None, classifier_id: int | None = None) -> FitSummary:
+            renderer: Any = None, classifier_id: int | None = None, progress: Progress | None = None) -> FitSummary:
     """Fit every pending pair (see the module docstring); resumable and idempotent, one bad pair never stops it."""
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
@@ -422,13 +423,13 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
         from photoshape_flow.pipeline.fit_calibration import ensure_calibration
 
         try:
-            ctx.calibration = ensure_calibration(ctx, settings)
+            ctx.calibration = ensure_calibration(ctx, settings, progress)
         except Exception as exc:  # the hand-set weights still rank; the report and the log say why
             log.warning("fit: calibration failed (%s: %s); hand-set weights", type(exc).__name__, exc)
             summary.weights["error"] = f"{type(exc).__name__}: {exc}"[:500]
     summary.weights = {**weights_report(ctx), **summary.weights}
     stage = f"{METHOD}:{ctx.method_key}"
-    for pair_id in todo:
+    for pair_id in counted(progress, "fit pairs", todo):
         try:
             with session_scope(url) as session:
                 pair = session.get(m.Pair, pair_id)

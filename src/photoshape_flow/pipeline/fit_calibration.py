@@ -47,6 +47,7 @@ from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit.scene import FitScene, FrameRenderer, candidate_terms, render_candidates, select_with_exposure
 from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.vocab import STATUS_OK
 
 log = logging.getLogger(__name__)
@@ -232,7 +233,8 @@ def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int) -> str:
                         "materials": sorted(ctx.material_substance), "envmaps": sorted(ctx.envmaps.items())})
 
 
-def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering]) -> dict[str, Any] | None:
+def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering],
+                    progress: Progress | None = None) -> dict[str, Any] | None:
     """The calibration record of `renders` (see the module docstring); None when no usable case came out.
 
     Every blur of `fit.calibration_blurs` (or `fit.blur` alone) builds its cases from the same
@@ -245,19 +247,19 @@ def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering]
     frame = CachedFrame(plain)
     ctx._frame = frame  # the blur contexts below share it; the stage gets the plain one back
     try:
-        return _fit_cases(ctx, settings, renders, ranker, frame, started)
+        return _fit_cases(ctx, settings, renders, ranker, frame, started, progress)
     finally:
         ctx._frame = plain
 
 
 def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ranker: RenderRanker,
-               frame: CachedFrame, started: float) -> dict[str, Any] | None:
+               frame: CachedFrame, started: float, progress: Progress | None = None) -> dict[str, Any] | None:
     """`fit_calibration`'s loop over renders and blurs, then the fit of the best blur."""
     blurs = tuple(dict.fromkeys(float(b) for b in (ctx.cfg.calibration_blurs or (ctx.cfg.blur,))))
     contexts = {b: with_blur(ctx, b) for b in blurs}
     cases: dict[float, list[cal.Case]] = {b: [] for b in blurs}
     counts = {"renders": 0, "parts": 0, "true_in_candidates": 0, "failed": 0}
-    for row in renders:
+    for row in counted(progress, "fit calibration renders", renders):
         frame.clear()
         try:
             found = {b: render_cases(contexts[b], ranker, row, settings) for b in blurs}
@@ -302,7 +304,7 @@ def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ran
     return record
 
 
-def ensure_calibration(ctx: Any, settings: Settings) -> dict[str, Any] | None:
+def ensure_calibration(ctx: Any, settings: Settings, progress: Progress | None = None) -> dict[str, Any] | None:
     """The classifier's fitted weights for this config, fitted now when none are stored for it (None: hand-set)."""
     if ctx.cfg.calibration_cases <= 0:
         return None
@@ -315,7 +317,7 @@ def ensure_calibration(ctx: Any, settings: Settings) -> dict[str, Any] | None:
         session.expunge_all()
     if isinstance(stored, dict) and stored.get("key") == key:
         return stored.get("record")
-    record = fit_calibration(ctx, settings, renders) if renders else None
+    record = fit_calibration(ctx, settings, renders, progress) if renders else None
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, ctx.classifier.id)
         if classifier is not None:  # stored even when None: the hand-set fallback is not re-tried every run

@@ -30,7 +30,7 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
     from photoshape_flow.pipeline.fit import run_fit
 
     summary = run_fit(cfg, pair_ids=None if work is None else list(work.ids), settings=ctx.settings,
-                      renderer=ctx.renderer)
+                      renderer=ctx.renderer, progress=ctx.progress)
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
         details={summary.method_key or "fit": {"pairs": summary.pairs_done, "rows": summary.rows,
