@@ -188,43 +188,6 @@ def evaluate_training(session: Session) -> list[Metric]:
     return out
 
 
-class RelightingScores:
-    """The relighting error of each (pair, method) whose pair shows the exemplar's own shape
-    (`relighting_eval`): the true materials' renders are made once per pair, at most `max_pairs`
-    pairs per method are rendered."""
-
-    def __init__(self, store: BlobStore, size: int, spp: int, max_pairs: int | None):
-        self.store, self.size, self.spp, self.max_pairs = store, size, spp, max_pairs
-        self.relighter: Any = None
-        self.truth_views: dict[int, Any] = {}  # pair id -> the true render's views (None: no true render)
-        self.pairs: dict[str, int] = defaultdict(int)
-
-    def wants(self, session: Session, pair: m.Pair, method_key: str, truth: TruthEntry) -> bool:
-        if self.max_pairs is not None and self.pairs[method_key] >= self.max_pairs:
-            return False
-        shape = session.get(m.Shape, pair.shape_id)
-        return bool(truth.in_collection) and shape is not None and shape.source_id == truth.shape
-
-    def error(self, session: Session, pair: m.Pair, method_key: str, chosen: dict[int, int | None],
-              truth: TruthEntry) -> float | None:
-        from photoshape_flow.pipeline.relighting_eval import Relighter, relighting_error, true_materials
-
-        try:
-            if self.relighter is None:
-                self.relighter = Relighter(session, self.store, self.size, self.spp)
-            if pair.id not in self.truth_views:
-                true = true_materials(session, session.get(m.Shape, pair.shape_id), truth)
-                self.truth_views[pair.id] = None if true is None else self.relighter.views(session, pair, true)
-            if self.truth_views[pair.id] is None:
-                return None
-            value = relighting_error(self.relighter, session, pair, chosen, self.truth_views[pair.id])
-        except Exception as exc:  # one unrenderable pair never stops the evaluation
-            log.warning("pair %s: relighting render failed: %s", pair.id, exc)
-            return None
-        self.pairs[method_key] += 1
-        return value if math.isfinite(value) else None
-
-
 class _Rerenderer:
     """Renders a pair's PhotoShape at the exemplar's camera, cropped like the exemplar."""
 
@@ -342,6 +305,8 @@ def inference_observations(
         ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
         method_of[a.method_key] = a.method
     scores: Scores = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
+    from photoshape_flow.pipeline.relighting_eval import RelightingScores
+
     relight = RelightingScores(store, relight_size, rerender_spp, relight_max_pairs)
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
     rerender_pairs: dict[str, int] = defaultdict(int)

@@ -11,7 +11,9 @@ part's true material is in the library (otherwise there is no "true" render to c
 
 from __future__ import annotations
 
+import logging
 import math
+from collections import defaultdict
 from collections.abc import Mapping
 from typing import Any
 
@@ -23,6 +25,8 @@ from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.groundtruth import TruthEntry
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
+
+log = logging.getLogger(__name__)
 
 NOVEL_VIEWS_DEG = (90.0, 180.0, 270.0)  # azimuth turns from the pair's camera
 
@@ -118,3 +122,38 @@ def relighting_error(relighter: Relighter, session: Session, pair: m.Pair, predi
               for p, t in zip(relighter.views(session, pair, predicted), truth_views, strict=True)]
     finite = [v for v in values if math.isfinite(v)]
     return float(np.mean(finite)) if finite else float("nan")
+
+
+class RelightingScores:
+    """The relighting error of each (pair, method) whose pair shows the exemplar's own shape
+    (`relighting_eval`): the true materials' renders are made once per pair, at most `max_pairs`
+    pairs per method are rendered."""
+
+    def __init__(self, store: BlobStore, size: int, spp: int, max_pairs: int | None):
+        self.store, self.size, self.spp, self.max_pairs = store, size, spp, max_pairs
+        self.relighter: Any = None
+        self.truth_views: dict[int, Any] = {}  # pair id -> the true render's views (None: no true render)
+        self.pairs: dict[str, int] = defaultdict(int)
+
+    def wants(self, session: Session, pair: m.Pair, method_key: str, truth: TruthEntry) -> bool:
+        if self.max_pairs is not None and self.pairs[method_key] >= self.max_pairs:
+            return False
+        shape = session.get(m.Shape, pair.shape_id)
+        return bool(truth.in_collection) and shape is not None and shape.source_id == truth.shape
+
+    def error(self, session: Session, pair: m.Pair, method_key: str, chosen: dict[int, int | None],
+              truth: TruthEntry) -> float | None:
+        try:
+            if self.relighter is None:
+                self.relighter = Relighter(session, self.store, self.size, self.spp)
+            if pair.id not in self.truth_views:
+                true = true_materials(session, session.get(m.Shape, pair.shape_id), truth)
+                self.truth_views[pair.id] = None if true is None else self.relighter.views(session, pair, true)
+            if self.truth_views[pair.id] is None:
+                return None
+            value = relighting_error(self.relighter, session, pair, chosen, self.truth_views[pair.id])
+        except Exception as exc:  # one unrenderable pair never stops the evaluation
+            log.warning("pair %s: relighting render failed: %s", pair.id, exc)
+            return None
+        self.pairs[method_key] += 1
+        return value if math.isfinite(value) else None
