@@ -76,3 +76,12 @@ def plant_true_pair(session, store: BlobStore, shape: m.Shape, exemplar_id: int,
     to_shape = np.array([0] + [index[name] for name in sorted(truth.parts)], np.uint8)
     session.add(m.Alignment(pair_id=pair.id, method="flow-crf", crf_blob=store.put_image(to_shape[labels])))
     return pair
+
+
+def plant_ranking(session, pair: m.Pair, part, classifier: m.Classifier, planted) -> None:  # type: ignore[no-untyped-def]
+    """The classifier's rows for one part: `planted` materials ranked in that order (scores 0.5, 0.3, 0.2)."""
+    for rank, (material, score) in enumerate(zip(planted, (0.5, 0.3, 0.2), strict=True), start=1):
+        session.add(m.Assignment(pair_id=pair.id, part_id=part.id, method="classifier",
+                                 method_key=f"classifier:{classifier.id}", classifier_id=classifier.id,
+                                 rank=rank, material_id=material.id, score=score,
+                                 substance=material.substance, params_hash="planted"))

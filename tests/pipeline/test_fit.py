@@ -27,7 +27,7 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
     Returns (pair, part) -> true material, and the material the planted classifier was not trained on.
     """
     from tests.conftest import ingest_tiny_demo
-    from tests.pipeline.aligned import plant_true_pair
+    from tests.pipeline.aligned import plant_ranking, plant_true_pair
 
     from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
     from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
@@ -59,11 +59,7 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
                 true = materials[truth.parts[part.name].material]
                 others = [x for x in materials.values() if x.substance != true.substance]
                 planted = [others[part.index % len(others)], true, others[(part.index + 3) % len(others)]]
-                for rank, (material, score) in enumerate(zip(planted, (0.5, 0.3, 0.2), strict=True), start=1):
-                    session.add(m.Assignment(pair_id=pair.id, part_id=part.id, method="classifier",
-                                             method_key=f"classifier:{classifier.id}", classifier_id=classifier.id,
-                                             rank=rank, material_id=material.id, score=score,
-                                             substance=material.substance, params_hash="planted"))
+                plant_ranking(session, pair, part, classifier, planted)
                 truth_of[(pair.id, part.id)] = true.id
             if not blind:  # the first exemplar also gets a better-ranked pair whose alignment lost every part
                 other = next(x for name, x in sorted(shapes.items()) if name != truth.shape)

@@ -35,7 +35,7 @@ def _plant(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[tuple[i
     import json
 
     from tests.conftest import ingest_tiny_demo
-    from tests.pipeline.aligned import plant_true_pair
+    from tests.pipeline.aligned import plant_ranking, plant_true_pair
 
     from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
     from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
@@ -67,11 +67,7 @@ def _plant(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[tuple[i
                 true = truth.parts[part.name]
                 others = [x for x in materials if x.substance != true.substance]  # the ranking is always wrong
                 planted = [others[(part.index + k) % len(others)] for k in (0, 2, 4)]
-                for rank, (material, score) in enumerate(zip(planted, (0.5, 0.3, 0.2), strict=True), start=1):
-                    session.add(m.Assignment(pair_id=pair.id, part_id=part.id, method="classifier",
-                                             method_key=f"classifier:{classifier.id}", classifier_id=classifier.id,
-                                             rank=rank, material_id=material.id, score=score,
-                                             substance=material.substance, params_hash="planted"))
+                plant_ranking(session, pair, part, classifier, planted)
                 truth_of[(pair.id, part.id)] = true.material
     return truth_of, folder
 
