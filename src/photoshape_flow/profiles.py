@@ -192,8 +192,9 @@ PROFILES: dict[str, Profile] = {
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
         training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
-        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=6,
-                      refine_size=48, calibration_cases=6),  # a smoke profile: the calibration runs, briefly
+        # a smoke profile: calibration and refinement run, briefly (they are over half of a tiny run's time)
+        fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=3,
+                      refine_size=32, calibration_cases=3, calibration_blurs=(1.0,)),
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
     ),
     "small": Profile(
