@@ -14,6 +14,7 @@ from photoshape_flow.demo.exemplars import ELEVATION_RANGE, FOV_RANGE, degrade, 
 from photoshape_flow.demo.generate import SIZES, collection_shapes, heldout_shapes, plan_exemplars
 from photoshape_flow.demo.materials import select_recipes
 from photoshape_flow.demo.seeding import child_rng
+from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.vocab import SUBSTANCES
 
@@ -121,6 +122,11 @@ def test_layout_and_groundtruth(demo) -> None:
         assert sorted(ex.visible_parts) == sorted(ex.part_names[i] for i in ids)
         # a product photo: near-white background, the object clearly darker on average
         assert image[mask == 0].mean() > 200 and image[mask > 0].mean() < image[mask == 0].mean() - 20, stem
+        # the light it was rendered under, in the format's `lighting` (a held-out envmap's file)
+        (entry,) = [e for e in read_groundtruth_file(manifest.groundtruth).entries if e.stem == stem]
+        assert entry.lighting is not None and entry.lighting.path is not None and entry.lighting.path.is_file()
+        assert entry.lighting.path.stem in gt.heldout_envmaps
+        assert (entry.lighting.rotation, entry.lighting.scale) == (ex.envmap["rotation"], ex.envmap["scale"])
         labels = ex.substance_mask(SUBSTANCES)
         assert set(np.unique(labels[mask > 0]).tolist()) <= set(range(1, len(SUBSTANCES) + 1))
 

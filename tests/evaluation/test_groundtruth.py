@@ -14,6 +14,7 @@ from photoshape_flow.evaluation.groundtruth import (
     CameraTruth,
     GroundTruthError,
     ItemRef,
+    LightingTruth,
     PartTruth,
     parse_groundtruth_data,
     read_groundtruth_file,
@@ -55,6 +56,16 @@ def test_a_full_entry_becomes_typed_records() -> None:
     assert (minimal.camera, minimal.mask, minimal.in_collection, minimal.part_names) == (None, None, None, {})
 
 
+def test_lighting_is_a_file_beside_the_truth_or_a_name() -> None:
+    """An envmap file is resolved against the file's folder (what fit's attribution renders with); a
+    bare name is kept for the tool to find; rotation and scale default to EnvmapSpec's 0 and 1."""
+    (e,) = parse(entry(lighting={"envmap": "envmaps/studio.hdr", "rotation": 1.25, "scale": 0.9})).entries
+    assert e.lighting == LightingTruth("envmaps/studio.hdr", 1.25, 0.9, Path("/gt/envmaps/studio.hdr"))
+    (named,) = parse(entry(lighting={"envmap": "kloppenheim_06"})).entries
+    assert named.lighting == LightingTruth("kloppenheim_06", 0.0, 1.0, None)
+    assert "lighting" not in named.extra
+
+
 def test_a_material_mask_names_materials_not_parts() -> None:
     (e,) = parse(entry(mask={"path": "m.png", "kind": "material", "values": {"3": "velvet"}})).entries
     assert e.mask is not None and e.mask.kind == "material" and e.mask.values == {3: "velvet"}
@@ -80,6 +91,9 @@ def test_a_material_mask_names_materials_not_parts() -> None:
     (entry(mask={"path": "m.png", "values": {}}), "mask.values is empty"),
     (entry(mask={"path": "m.png", "kind": "depth", "values": {"1": "seat"}}), "mask.kind must be one of"),
     (entry(mask={"values": {"1": "seat"}}), "mask.path must be a non-empty string"),
+    (entry(lighting={"rotation": 1.0}), "lighting.envmap must be a non-empty string"),
+    (entry(lighting={"envmap": "a.hdr", "scale": 0}), "lighting.scale must be positive"),
+    (entry(lighting={"envmap": "a.hdr", "rotation": "north"}), "lighting.rotation must be a finite number"),
 ])
 def test_each_bad_entry_gets_one_message_and_the_others_are_kept(bad: Any, reason: str) -> None:
     gt = parse(entry(source_id="good1"), bad, entry(source_id="good2"))

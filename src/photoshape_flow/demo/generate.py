@@ -420,6 +420,8 @@ def generate_demo(
             },
             "mask": {"path": mask_rel, "kind": "part",
                      "values": {str(i): p.name for i, p in enumerate(furniture.parts, start=1)}},
+            "lighting": {"envmap": held_paths[plan.envmap["name"]].relative_to(root).as_posix(),
+                         "rotation": plan.envmap["rotation"], "scale": plan.envmap["scale"]},
             "image": image_rel,
             "size": plan.size,
             "similar_to": plan.similar_to,

@@ -17,6 +17,7 @@ that only its benches and experiments use (paths relative to the demo folder):
                     "camera": {"azimuth", "elevation", "distance", "fov"},
                     "parts": {name: {"material", "substance"}},
                     "mask": {"path", "kind": "part", "values": {"1": name, ...}},
+                    "lighting": {"envmap": "groundtruth/envmaps/<name>.hdr", "rotation", "scale"},
                     "image", "size", "similar_to", "visible_parts",      # the demo's own
                     "envmap": {"name", "rotation", "scale"}, "degradation": {...}, "spec_hash": str}, ...]}
 

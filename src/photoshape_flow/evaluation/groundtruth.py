@@ -61,6 +61,19 @@ class CameraTruth:
 
 
 @dataclass(frozen=True)
+class LightingTruth:
+    """The light the photo was taken under: an equirectangular envmap turned by `rotation` radians about
+    +y and scaled by `scale`, as `render.EnvmapSpec` lights a scene. `envmap` is a file (.hdr/.exr,
+    relative to the ground-truth file; `path`) or the name of an envmap (ingested, or found by the
+    tool that uses it in a folder it is given)."""
+
+    envmap: str
+    rotation: float = 0.0
+    scale: float = 1.0
+    path: Path | None = None
+
+
+@dataclass(frozen=True)
 class PartTruth:
     name: str
     material: str
@@ -91,6 +104,7 @@ class TruthEntry:
     parts: dict[str, PartTruth]
     camera: CameraTruth | None = None
     mask: MaskTruth | None = None
+    lighting: LightingTruth | None = None
     in_collection: bool | None = None
     material_substances: dict[str, str] = field(default_factory=dict)  # material masks: name -> substance
     extra: dict[str, Any] = field(default_factory=dict)
@@ -190,6 +204,24 @@ def _camera(value: Any) -> CameraTruth | None:
                        _number(obj.get("elevation"), "camera.elevation"), **optional)
 
 
+ENVMAP_SUFFIXES = (".hdr", ".exr")
+
+
+def _lighting(value: Any, root: Path) -> LightingTruth | None:
+    if value is None:
+        return None
+    obj = _object(value, "lighting")
+    envmap = _text(obj.get("envmap"), "lighting.envmap")
+    rotation = 0.0 if obj.get("rotation") is None else _number(obj["rotation"], "lighting.rotation")
+    scale = 1.0 if obj.get("scale") is None else _number(obj["scale"], "lighting.scale")
+    if scale <= 0:
+        raise EntryError(f"lighting.scale must be positive, got {scale}")
+    path = Path(envmap)
+    if path.suffix.lower() in ENVMAP_SUFFIXES:
+        return LightingTruth(envmap, rotation, scale, path if path.is_absolute() else root / path)
+    return LightingTruth(envmap, rotation, scale)
+
+
 def _parts(value: Any) -> dict[str, PartTruth]:
     obj = _object(value, "parts")
     if not obj:
@@ -237,7 +269,7 @@ def parse_entry(data: Any, root: Path, label: str) -> TruthEntry:
     if in_collection is not None and not isinstance(in_collection, bool):
         raise EntryError(f"in_collection must be true or false, got {in_collection!r}")
     parts = _parts(obj.get("parts"))
-    known = {"source", "source_id", "shape", "in_collection", "camera", "parts", "mask"}
+    known = {"source", "source_id", "shape", "in_collection", "camera", "parts", "mask", "lighting"}
     return TruthEntry(
         label=f"{label} ({exemplar})",
         exemplar=exemplar,
@@ -245,6 +277,7 @@ def parse_entry(data: Any, root: Path, label: str) -> TruthEntry:
         parts=parts,
         camera=_camera(obj.get("camera")),
         mask=_mask(obj.get("mask"), root, parts),
+        lighting=_lighting(obj.get("lighting"), root),
         in_collection=in_collection,
         extra={k: v for k, v in obj.items() if k not in known},
     )
