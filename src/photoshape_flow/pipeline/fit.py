@@ -349,11 +349,13 @@ def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candid
 
 
 def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
-                     light: dict[str, Any]) -> tuple[dict[int, dict[int, float | None]], float]:
-    """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`)."""
+                     light: dict[str, Any], envmap: Any = None) -> tuple[dict[int, dict[int, float | None]], float]:
+    """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`);
+    `envmap` replaces the lighting's training envmap (the attribution experiment lights with the truth's)."""
     if not candidates:
         return {}, float(light.get("exposure", 1.0))
-    envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+    if envmap is None:
+        envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
     renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
     return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
                                 ctx.weights, ctx.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)

@@ -1,0 +1,241 @@
+"""Where does `fit` lose? Its selection re-run with the ground truth's lighting and part mask.
+
+    python -m experiments.fit_attribution.run --profile small
+    python -m experiments.fit_attribution.run --profile small --groundtruth WORLD/groundtruth.json \\
+        --envmap-dir ../shared/data/envmaps          # where `lighting.envmap` names, not paths, are found
+
+For every pair whose shape is the exemplar's true one, the fit selection (no refinement) runs four
+times, each on the same parts and candidates' source (the stored classifier ranking, the fitted
+weights of the classifier's calibration):
+
+    fit        the stage as it runs: the exemplar's estimated lighting, the CRF part map
+    gt-light   the truth's envmap, rotation and scale instead of the estimate (exposure re-solved)
+    gt-mask    the photo's part regions from the truth's part mask instead of the CRF map
+    gt-both    both
+
+and the table gives material top-1 and substance accuracy per scored part (a part scored as
+`photoshape eval` scores it, against the CRF map) with 95% bootstrap intervals over exemplars, the
+classifier's rank-1 on the same parts, and how often the true material is among the candidates at
+all (the ceiling any distance can reach). Gains of gt-light / gt-mask over fit attribute misses to
+lighting / alignment; what gt-both still misses belongs to the distance and the candidates.
+Read-only: nothing is written to the database. Output:
+`<data root>/experiments/fit_attribution/results.json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from experiments.common import results_dir
+from photoshape_flow.align.partmap import crop_square, resize_labels
+from photoshape_flow.config import get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.evaluation.bootstrap import difference_interval, mean_interval
+from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
+from photoshape_flow.fit.appearance import erode
+from photoshape_flow.fit.scene import FitScene
+from photoshape_flow.fit.select import rank_candidates
+from photoshape_flow.pipeline.evaluate import pair_truths
+from photoshape_flow.pipeline.fit import (
+    ALIGNMENT_METHOD,
+    FitContext,
+    PairData,
+    candidates_of,
+    exemplar_lighting,
+    load_pair,
+    select_materials,
+)
+from photoshape_flow.pipeline.fit_calibration import ensure_calibration
+from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.pipeline.inference import resolve_classifier
+from photoshape_flow.profiles import resolve_profile
+from photoshape_flow.store import BlobStore
+
+CONDITIONS = ("fit", "gt-light", "gt-mask", "gt-both")
+Observations = dict[str, dict[str, dict[int, list[float]]]]  # condition -> figure -> exemplar -> values
+
+
+def truth_part_map(truth: TruthEntry, exemplar: m.Exemplar, index_of: dict[str, int], size: int) -> np.ndarray | None:
+    """The truth's part mask as the pair's part indices (-1 elsewhere) in the fit frame; None without a part mask."""
+    if truth.mask is None or truth.mask.kind != "part":
+        return None
+    native = truth.load_mask()
+    native = native[..., 0] if native.ndim == 3 else native
+    lut = np.full(int(max(max(truth.mask.values), int(native.max(initial=0)))) + 1, -1, np.int32)
+    for value, name in truth.mask.values.items():
+        lut[value] = index_of.get(name, -1)
+    crop = (exemplar.meta or {}).get("crop") or {"x0": 0, "y0": 0, "side": max(native.shape)}
+    cropped = crop_square(lut[native.astype(np.int64)], int(crop["x0"]), int(crop["y0"]), int(crop["side"]), fill=-1)
+    return resize_labels(cropped.astype(np.int32), size).astype(np.int32)
+
+
+def truth_envmap(truth: TruthEntry, envmap_dir: Path | None) -> Any:
+    """The truth's lighting as an envmap spec (None: no lighting, or its file cannot be found)."""
+    from photoshape_flow.render import EnvmapSpec
+
+    light = truth.lighting
+    if light is None:
+        return None
+    path = light.path or (envmap_dir / f"{light.envmap}.hdr" if envmap_dir is not None else None)
+    if path is None or not path.is_file():
+        return None
+    return EnvmapSpec(path, scale=light.scale, rotation=light.rotation)
+
+
+def with_labels(ctx: FitContext, data: PairData, labels: np.ndarray, min_pixels: int = 12) -> PairData:
+    """The pair's data with the photo's part regions taken from `labels` (same photo, frame and parts),
+    eroded and size-filtered as `FitScene.from_photo` does with the CRF map."""
+    scene = data.scene
+    masks = {}
+    for index, rows in data.rows.items():
+        if rows and not rows[0].unobserved:
+            region = erode(labels == index, ctx.cfg.erode)
+            if int(region.sum()) >= min_pixels:
+                masks[index] = region
+    return PairData(data.pair, FitScene(scene.mesh, scene.camera, scene.photo_linear, scene.photo_lab, masks,
+                                        scene.blur), data.rows, data.source_hash)
+
+
+def winners(ctx: FitContext, data: PairData, light: dict[str, Any], envmap: Any) -> tuple[dict[int, int], dict]:
+    """Each observed part's fit winner under the given lighting, and its candidates."""
+    candidates = candidates_of(ctx, data)
+    measured, _ = select_materials(ctx, data, candidates, light, envmap)
+    return ({i: rank_candidates(c, measured.get(i, {}), ctx.prior_weight)[0].candidate.material_id
+             for i, c in candidates.items() if c}, candidates)
+
+
+def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEntry, scored: dict[int, tuple],
+               envmap_dir: Path | None, obs: Observations) -> None:
+    """Every condition's winners on the pair's scored parts, added to `obs` under the exemplar."""
+    exemplar = session.get(m.Exemplar, data.pair.exemplar_id)
+    light, _ = exemplar_lighting(session, ctx, data)
+    index_of = {p.name: p.index for p in session.execute(
+        sa.select(m.Part).where(m.Part.shape_id == data.pair.shape_id)).scalars() if p.name}
+    labels = truth_part_map(truth, exemplar, index_of, ctx.cfg.size)
+    gt_data = with_labels(ctx, data, labels) if labels is not None else None
+    gt_env = truth_envmap(truth, envmap_dir)
+    runs = {"fit": (data, None)}
+    if gt_env is not None:
+        runs["gt-light"] = (data, gt_env)
+    if gt_data is not None:
+        runs["gt-mask"] = (gt_data, None)
+    if gt_env is not None and gt_data is not None:
+        runs["gt-both"] = (gt_data, gt_env)
+    classifier_first = {i: rows[0].material_id for i, rows in data.rows.items() if rows}
+    for name, (pair_data, envmap) in runs.items():
+        # the truth's light starts from exposure 1 (its scale is the photo's); the rounds re-solve it
+        chosen, candidates = winners(ctx, pair_data, light if envmap is None else {**light, "exposure": 1.0}, envmap)
+        for index, (material, substance) in scored.items():
+            if index not in chosen:
+                continue
+            winner = chosen[index]
+            figures = obs[name]
+            figures["top1"][exemplar.id].append(float(ctx.material_rows[winner].name == material))
+            figures["substance"][exemplar.id].append(float(ctx.material_substance[winner] == substance))
+            names = {ctx.material_rows[c.material_id].name for c in candidates.get(index, [])}
+            figures["truth_in_candidates"][exemplar.id].append(float(material in names))
+            if name == "fit":
+                first = classifier_first.get(index)
+                row = ctx.material_rows.get(first) if first is not None else None
+                obs["classifier"]["top1"][exemplar.id].append(float(row is not None and row.name == material))
+                obs["classifier"]["substance"][exemplar.id].append(
+                    float(row is not None and row.substance == substance))
+
+
+def measure(profile: str, overrides: list[str], groundtruth: Path, envmap_dir: Path | None,
+            source: str | None) -> tuple[Observations, dict[str, Any]]:
+    settings = get_settings()
+    cfg = resolve_profile(profile, overrides).profile.fit
+    store = BlobStore(settings.blob_root)
+    engine = sa.create_engine(settings.resolved_database_url)
+    obs: Observations = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
+    counts = defaultdict(int)
+    with Session(engine) as session:  # never committed: the experiment writes nothing
+        classifier = resolve_classifier(session)
+        if classifier is None:
+            raise SystemExit("no trained material classifier: run the pipeline through training first")
+        ctx = FitContext(session, store, classifier, cfg)
+        ctx.calibration = ensure_calibration(ctx, settings)
+        truths = match_groundtruth(session, read_groundtruth_file(groundtruth), source).truths
+        shapes = {(s.source, s.source_id): s.id for s in session.execute(sa.select(m.Shape)).scalars()}
+        pairs = session.execute(
+            sa.select(m.Pair, m.Alignment).join(m.Alignment, sa.and_(
+                m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD, m.Alignment.status == "ok"))
+            .where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude).order_by(m.Pair.id)).all()
+        for pair, alignment in pairs:
+            truth = truths[pair.exemplar_id]
+            if shapes.get((truth.shape_ref.source, truth.shape_ref.source_id)) != pair.shape_id:
+                continue
+            counts["own_shape_pairs"] += 1
+            exemplar = session.get(m.Exemplar, pair.exemplar_id)
+            scored = pair_truths(session, store, pair, exemplar, alignment, truth)
+            try:
+                data = load_pair(session, ctx, pair)
+            except ValueError as exc:
+                print(f"pair {pair.id}: skipped ({exc})")
+                continue
+            counts["lighting"] += truth.lighting is not None
+            counts["part_mask"] += truth.mask is not None and truth.mask.kind == "part"
+            score_pair(ctx, session, data, truth, scored, envmap_dir, obs)
+        session.rollback()
+    return obs, dict(counts)
+
+
+def table(obs: Observations) -> dict[str, dict[str, Any]]:
+    """Each condition's means with intervals, and each condition minus `fit` (paired)."""
+    out: dict[str, dict[str, Any]] = {}
+    for name in ("classifier", *CONDITIONS):
+        if name not in obs:
+            continue
+        row: dict[str, Any] = {}
+        for figure, values in sorted(obs[name].items()):
+            est = mean_interval(values)
+            row[figure] = {"value": est.value, "low": est.low, "high": est.high, "count": est.count}
+            if name != "fit" and figure in obs["fit"]:
+                diff = difference_interval(values, obs["fit"][figure])
+                row[f"{figure}_vs_fit"] = {"value": diff.value, "low": diff.low, "high": diff.high}
+        out[name] = row
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--profile", default="small")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], help="profile override (repeatable)")
+    parser.add_argument("--groundtruth", type=Path, default=None, help="default: the demo's under the data root")
+    parser.add_argument("--envmap-dir", type=Path, default=None, help="where lighting.envmap names are found")
+    parser.add_argument("--source", default=None, help="only the exemplars of this source")
+    args = parser.parse_args()
+    settings = get_settings()
+    groundtruth = args.groundtruth or sorted(Path(settings.data_root).glob("demo/*/groundtruth.json"))[-1]
+    start = time.perf_counter()
+    obs, counts = measure(args.profile, args.overrides, groundtruth, args.envmap_dir, args.source)
+    results = {"groundtruth": str(groundtruth), "profile": args.profile, "overrides": args.overrides,
+               "counts": counts, "seconds": round(time.perf_counter() - start, 1), "table": table(obs)}
+    for name, row in results["table"].items():
+        cells = []
+        for figure in ("top1", "substance", "truth_in_candidates"):
+            if figure in row and row[figure]["value"] is not None:
+                cell = row[figure]
+                span = "" if cell["low"] is None else f" ({cell['low']:.2f}-{cell['high']:.2f})"
+                delta = row.get(f"{figure}_vs_fit")
+                vs = "" if not delta or delta["value"] is None else f" [{delta['value']:+.3f}]"
+                cells.append(f"{figure} {cell['value']:.3f}{span}{vs} n={cell['count']}")
+        print(f"{name:11s}", " | ".join(cells))
+    print(counts, f"{results['seconds']} s")
+    out = results_dir(settings, "fit_attribution")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()
