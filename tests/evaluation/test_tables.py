@@ -26,6 +26,23 @@ def test_headline_puts_ours_first_then_the_baselines_with_the_gap_in_top1() -> N
     assert headline_rows(metrics[-1:]) == []
 
 
+def test_a_refining_method_gets_a_refined_row_below_its_selection() -> None:
+    """Before fit (ours), after selection (fit), after refinement (fit refined): the refined row takes the
+    rendered figures from `<metric>_refined` and the rest (materials did not change) from the selection."""
+    metrics = [
+        Metric("inference", "classifier:2", "material_top1", 0.5, 8),
+        Metric("inference", "fit:2", "material_top1", 0.625, 8),
+        Metric("inference", "fit:2", "rerender_rmse", 0.25, 4),
+        Metric("inference", "fit:2", "rerender_rmse_refined", 0.2, 4),
+        Metric("inference", "fit:2", "relight_rmse", 0.1, 3),
+    ]
+    rows = headline_rows(metrics)
+    assert [r["method"] for r in rows] == ["ours (classifier 2)", "fit:2", "fit:2 refined"]
+    assert (rows[1]["RMSE"], rows[2]["RMSE"]) == ("0.250", "0.200")
+    assert rows[2]["top-1"] == rows[1]["top-1"] == "0.625" and rows[2]["relit"] == "0.100"
+    assert rows[2]["vs ours"] == rows[1]["vs ours"] == "+0.125"
+
+
 def test_stage_rows_show_only_what_was_measured() -> None:
     metrics = [
         Metric("coarse-alignment", "hog", "recall@1", 0.8, None),

@@ -29,6 +29,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline import evaluate as ev
+from photoshape_flow.pipeline import rerender_eval
 from photoshape_flow.pipeline.evaluate import Metric
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
@@ -503,20 +504,20 @@ def luminance_ssim(a: float, b: float) -> float:
 
 def test_rerender_error_of_identical_images() -> None:
     image = np.random.default_rng(0).integers(0, 256, (16, 16, 3), dtype=np.uint8)
-    rmse, ssim = ev.rerender_error(image, image.copy(), np.ones((16, 16), bool))
+    rmse, ssim = rerender_eval.rerender_error(image, image.copy(), np.ones((16, 16), bool))
     assert rmse == 0.0 and ssim == pytest.approx(1.0)
 
 
 def test_rerender_error_of_flat_images() -> None:
     """150 against 100 everywhere: RMSE 50/255; SSIM the luminance term of 150/255 and 100/255."""
-    rmse, ssim = ev.rerender_error(flat(150), flat(100), np.ones((16, 16), bool))
+    rmse, ssim = rerender_eval.rerender_error(flat(150), flat(100), np.ones((16, 16), bool))
     assert rmse == pytest.approx(50 / 255)
     assert ssim == pytest.approx(luminance_ssim(150 / 255, 100 / 255))  # 0.9231
 
 
 def test_rerender_rmse_averages_over_the_three_channels() -> None:
     """Only red off by 51 (0.2): sqrt((0.2^2 + 0 + 0) / 3), not 0.2 (a per-pixel norm) or the grey error."""
-    rmse, _ = ev.rerender_error(flat((151, 100, 100)), flat(100), np.ones((16, 16), bool))
+    rmse, _ = rerender_eval.rerender_error(flat((151, 100, 100)), flat(100), np.ones((16, 16), bool))
     assert rmse == pytest.approx(0.2 / math.sqrt(3))
 
 
@@ -526,13 +527,13 @@ def test_rerender_error_counts_only_the_exemplars_mask() -> None:
     render[:, 10:] = 250  # columns 10..15 differ
     mask = np.zeros((16, 16), bool)
     mask[:, :6] = True  # columns 0..5: the window (radius 3) stops at column 8
-    assert ev.rerender_error(render, photo, mask) == (0.0, pytest.approx(1.0))
-    rmse, _ = ev.rerender_error(render, photo, np.ones((16, 16), bool))
+    assert rerender_eval.rerender_error(render, photo, mask) == (0.0, pytest.approx(1.0))
+    rmse, _ = rerender_eval.rerender_error(render, photo, np.ones((16, 16), bool))
     assert rmse == pytest.approx(math.sqrt(6 / 16) * 150 / 255)  # 6 of 16 columns off by 150
 
 
 def test_rerender_error_of_an_empty_mask_is_nan() -> None:
-    rmse, ssim = ev.rerender_error(flat(150), flat(100), np.zeros((16, 16), bool))
+    rmse, ssim = rerender_eval.rerender_error(flat(150), flat(100), np.zeros((16, 16), bool))
     assert math.isnan(rmse) and math.isnan(ssim)
 
 
@@ -548,11 +549,14 @@ class FakeRerenderer:
     def set_envmap(self, envmap: Any) -> None:
         pass
 
-    def render(self, session: Session, pair: m.Pair, materials: dict[int, int | None]) -> tuple[np.ndarray, np.ndarray]:
-        FakeRerenderer.calls.append((pair.id, dict(materials)))
+    def render(self, session: Session, pair: m.Pair, materials: dict[int, int | None],
+               refinements: dict[int, Any] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        FakeRerenderer.calls.append((pair.id, dict(materials)) if refinements is None
+                                    else (pair.id, dict(materials), dict(refinements)))
         if pair.id not in self.level:
             raise RuntimeError("the shape is not visible")
-        return flat(self.level[pair.id], self.size), np.ones((self.size, self.size), bool)
+        brighter = 30 if refinements else 0  # a refined render is closer to nothing in particular: just different
+        return flat(self.level[pair.id] + brighter, self.size), np.ones((self.size, self.size), bool)
 
 
 def test_rerender_figures_per_method(db_url: str, store: BlobStore, tmp_path: Path,
@@ -576,7 +580,7 @@ def test_rerender_figures_per_method(db_url: str, store: BlobStore, tmp_path: Pa
     add_assignments(db_url, made, "a", "color-match", {1: ["oak"]})
     FakeRerenderer.level = {made.pairs[k]: level for k, level in (("a", 150), ("d", 150), ("c", 200), ("e", 150))}
     FakeRerenderer.calls = []
-    monkeypatch.setattr(ev, "_Rerenderer", FakeRerenderer)
+    monkeypatch.setattr(rerender_eval, "Rerenderer", FakeRerenderer)
     with session_scope(db_url) as session:
         metrics = by_name(ev.evaluate_inference(session, store, truths_of(db_url, made), rerender_size=8,
                                                 rerender_max_pairs=2))
@@ -601,11 +605,43 @@ def test_a_nan_rerender_error_is_left_out_of_the_mean(db_url: str, store: BlobSt
     add_assignments(db_url, made, "b", "classifier:1", {1: ["red_leather"]})
     add_assignments(db_url, made, "b", "color-match", {1: ["red_leather"]})
     FakeRerenderer.level = {made.pairs["a"]: 150, made.pairs["b"]: 200}
-    monkeypatch.setattr(ev, "_Rerenderer", FakeRerenderer)
+    monkeypatch.setattr(rerender_eval, "Rerenderer", FakeRerenderer)
     with session_scope(db_url) as session:
         metrics = by_name(ev.evaluate_inference(session, store, truths_of(db_url, made), rerender_size=8))
     assert metrics[("classifier:1", "rerender_rmse")] == (pytest.approx(50 / 255), 1)
     assert metrics[("color-match", "rerender_rmse")] == (None, 0)
+
+
+def test_a_refining_method_is_also_scored_as_refined_on_the_same_pairs(
+        db_url: str, store: BlobStore, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fit's "after refinement" column: a method with refined rank-1 rows gets `rerender_*_refined` over
+    the same pairs as `rerender_*`: pair a rendered again with its refinements (flat 150 + 30 against
+    grey 100), pair b (no refinement) counted with its selected value; other methods get no such figure,
+    and the cap of pairs counts each pair once."""
+    made = build_scene(db_url, store, tmp_path / "demo", {"a": ALL_SEAT, "b": ALL_SEAT},
+                       {"a": TOP_HALF, "b": TOP_HALF})
+    for stem in ("a", "b"):
+        add_assignments(db_url, made, stem, "fit:1", {1: ["oak", "red_leather"]})
+        add_assignments(db_url, made, stem, "classifier:1", {1: ["red_leather"]})
+    tint = {"tint": [1.2, 1.0, 0.8], "roughness_scale": 1.0, "uv_scale": 1.0, "uv_rotation": 0.0}
+    with session_scope(db_url) as session:
+        row = session.execute(sa.select(m.Assignment).where(
+            m.Assignment.pair_id == made.pairs["a"], m.Assignment.method_key == "fit:1",
+            m.Assignment.rank == 1)).scalar_one()
+        row.refinement = tint
+    FakeRerenderer.level = {made.pairs["a"]: 150, made.pairs["b"]: 200}
+    FakeRerenderer.calls = []
+    monkeypatch.setattr(rerender_eval, "Rerenderer", FakeRerenderer)
+    with session_scope(db_url) as session:
+        metrics = by_name(ev.evaluate_inference(session, store, truths_of(db_url, made), rerender_size=8,
+                                                rerender_max_pairs=2))
+    oak = {1: made.materials["oak"]}
+    assert (made.pairs["a"], oak, {1: tint}) in FakeRerenderer.calls
+    assert sum(len(c) == 3 for c in FakeRerenderer.calls) == 1  # b is not rendered again
+    assert metrics[("fit:1", "rerender_rmse")] == (pytest.approx((50 + 100) / 2 / 255), 2)
+    assert metrics[("fit:1", "rerender_rmse_refined")] == (pytest.approx((80 + 100) / 2 / 255), 2)
+    assert ("classifier:1", "rerender_rmse_refined") not in metrics
+    assert metrics[("classifier:1", "rerender_rmse")][1] == 2
 
 
 # --- training, pass-through dictionaries, the table ----------------------------------------------

@@ -29,15 +29,15 @@ import math
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.align.partmap import crop_square, exemplar_at, resize_labels, square_box, zoom_to_fit
+from photoshape_flow.align.partmap import crop_square, resize_labels
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -46,6 +46,7 @@ from photoshape_flow.evaluation.bootstrap import OBSERVATIONS, Observations, dif
 from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
+from photoshape_flow.pipeline.rerender_eval import RerenderScores, rendered_variants
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 
@@ -188,72 +189,14 @@ def evaluate_training(session: Session) -> list[Metric]:
     return out
 
 
-class _Rerenderer:
-    """Renders a pair's PhotoShape at the exemplar's camera, cropped like the exemplar."""
+@dataclass(frozen=True)
+class Choice:
+    """One ranked assignment as the evaluation reads it (the refinement only on rank-1 rows)."""
 
-    def __init__(self, store: BlobStore, size: int, spp: int):
-        from photoshape_flow.render import EnvmapSpec, Renderer
-        from photoshape_flow.render.specs import MaterialSpec
-
-        self.store = store
-        self.size = size
-        self.spp = spp
-        self.renderer = Renderer(resolve=store.resolve)
-        self._material_spec = MaterialSpec
-        self._envmap_spec = EnvmapSpec
-        self.meshes: dict[int, Any] = {}
-        self.materials: dict[int, Any] = {}
-        self.envmap = None
-
-    def set_envmap(self, envmap: m.Envmap | None) -> None:
-        if envmap is not None and envmap.blob:
-            self.envmap = self._envmap_spec(self.store.resolve(envmap.blob))
-
-    def material(self, row: m.Material) -> Any:
-        if row.id not in self.materials:
-            from photoshape_flow.pipeline.training_renders import material_spec
-
-            self.materials[row.id] = material_spec(row, self.store)
-        return self.materials[row.id]
-
-    def render(self, session: Session, pair: m.Pair, materials: dict[int, int | None]) -> tuple[np.ndarray, np.ndarray]:
-        from photoshape_flow.geometry.mesh import ShapeMesh
-        from photoshape_flow.render import Camera
-
-        if pair.shape_id not in self.meshes:
-            shape_row = session.get(m.Shape, pair.shape_id)
-            self.meshes[pair.shape_id] = ShapeMesh.from_npz_bytes(self.store.read_bytes(shape_row.mesh_blob))
-        mesh = self.meshes[pair.shape_id]
-        specs = []
-        for part in mesh.parts:
-            material_id = materials.get(part.index)
-            specs.append(self.material(session.get(m.Material, material_id)) if material_id else None)
-        camera = zoom_to_fit(mesh, Camera(pair.azimuth, pair.elevation, pair.camera_distance, pair.fov))
-        render_size = int(math.ceil(self.size * 1.25))
-        result = self.renderer.beauty(mesh, specs, camera, self.envmap, size=render_size, spp=self.spp, seed=0)
-        box = square_box(result.alpha > 0.5)
-        if box is None:
-            raise ValueError("the shape is not visible at the pair's camera")
-        rgb = crop_square(result.srgb, *box, fill=255)
-        alpha = crop_square(result.alpha, *box, fill=0.0)
-        rgb = cv2.resize(rgb, (self.size, self.size), interpolation=cv2.INTER_AREA)
-        alpha = cv2.resize(alpha, (self.size, self.size), interpolation=cv2.INTER_AREA) > 0.5
-        return rgb, alpha
-
-
-def rerender_error(render: np.ndarray, exemplar: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
-    """RMSE (sRGB in [0, 1]) and mean SSIM (grey) inside the exemplar's mask."""
-    from skimage.metrics import structural_similarity
-
-    a = render.astype(np.float64) / 255.0
-    b = exemplar.astype(np.float64) / 255.0
-    if not mask.any():
-        return float("nan"), float("nan")
-    rmse = float(np.sqrt(((a - b) ** 2)[mask].mean()))
-    grey_a = cv2.cvtColor(render, cv2.COLOR_RGB2GRAY).astype(np.float64) / 255.0
-    grey_b = cv2.cvtColor(exemplar, cv2.COLOR_RGB2GRAY).astype(np.float64) / 255.0
-    _, ssim_map = structural_similarity(grey_a, grey_b, data_range=1.0, full=True, win_size=7)
-    return rmse, float(ssim_map[mask].mean())
+    name: str | None
+    substance: str | None
+    material_id: int | None
+    refinement: dict[str, Any] | None = None
 
 
 # method key -> metric -> exemplar id -> values (one per scored part, or the pair's re-render)
@@ -298,19 +241,19 @@ def inference_observations(
         .where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
         .order_by(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.rank)
     ).all()
-    ranked: dict[tuple[int, str], dict[int, list[tuple[str | None, str | None, int | None]]]] = defaultdict(
-        lambda: defaultdict(list))
-    method_of: dict[str, str] = {}
+    ranked: dict[tuple[int, str], dict[int, list[Choice]]] = defaultdict(lambda: defaultdict(list))
+    refining: set[str] = set()  # methods with refined rows: they get the `_refined` figures too
     for a, part_index, name, substance in rows:
-        ranked[(a.pair_id, a.method_key)][part_index].append((name, substance or a.substance, a.material_id))
-        method_of[a.method_key] = a.method
+        ranked[(a.pair_id, a.method_key)][part_index].append(
+            Choice(name, substance or a.substance, a.material_id, a.refinement if a.rank == 1 else None))
+        if a.refinement:
+            refining.add(a.method_key)
     scores: Scores = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
     from photoshape_flow.pipeline.relighting_eval import RelightingScores
 
     relight = RelightingScores(store, relight_size, rerender_spp, relight_max_pairs)
+    rerender = RerenderScores(store, rerender_size, rerender_spp, rerender_max_pairs)
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
-    rerender_pairs: dict[str, int] = defaultdict(int)
-    rerenderer: _Rerenderer | None = None
     for (pair_id, method_key), parts in counted(progress, "eval pairs x methods", list(ranked.items())):
         pair = session.get(m.Pair, pair_id)
         exemplar = session.get(m.Exemplar, pair.exemplar_id)
@@ -322,43 +265,31 @@ def inference_observations(
             continue
         if pair_id not in truth_cache:
             truth_cache[pair_id] = pair_truths(session, store, pair, exemplar, alignment, truths[exemplar.id])
+        observed = scores[method_key]
         for part_index, choices in parts.items():
             truth = truth_cache[pair_id].get(part_index)
             if truth is None:
                 continue
-            names = [c[0] for c in choices]
-            observed = scores[method_key]
+            names = [c.name for c in choices]
             observed["material_top1"][exemplar.id].append(float(names[:1] == [truth[0]]))
             observed["material_top5"][exemplar.id].append(float(truth[0] in names[:5]))
-            if choices[0][1] is not None:
-                observed["substance_accuracy"][exemplar.id].append(float(choices[0][1] == truth[1]))
+            if choices[0].substance is not None:
+                observed["substance_accuracy"][exemplar.id].append(float(choices[0].substance == truth[1]))
+        chosen = {idx: c[0].material_id for idx, c in parts.items()}
+        refined = {idx: c[0].refinement for idx, c in parts.items() if c[0].refinement}
+        refines = method_key in refining
         if relight.wants(session, pair, method_key, truths[exemplar.id]):
-            chosen = {idx: c[0][2] for idx, c in parts.items()}
-            value = relight.error(session, pair, method_key, chosen, truths[exemplar.id])
-            if value is not None:
-                scores[method_key]["relight_rmse"][exemplar.id].append(value)
+            relit = partial(relight.error, session, pair, method_key, chosen, truths[exemplar.id])
+            for suffix, value in rendered_variants(relit, refined, refines).items():
+                if value is not None:
+                    observed[f"relight_rmse{suffix}"][exemplar.id].append(value)
         # re-render error: only pairs whose shape is the exemplar's best retrieval, to bound the cost
-        if pair.exemplar_rank not in (None, 1):
-            continue
-        if rerender_max_pairs is not None and rerender_pairs[method_key] >= rerender_max_pairs:
-            continue
-        if rerenderer is None:
-            from photoshape_flow.pipeline.photoshapes import choose_envmap
-
-            rerenderer = _Rerenderer(store, rerender_size, rerender_spp)
-            rerenderer.set_envmap(choose_envmap(session))
-        try:
-            chosen = {idx: c[0][2] for idx, c in parts.items()}
-            render, _ = rerenderer.render(session, pair, chosen)
-            photo, fg = exemplar_at(store.load_image(exemplar.image_blob), store.load_image(exemplar.mask_blob),
-                                    rerender_size)
-            rmse, ssim = rerender_error(render, photo, fg)
-        except Exception as exc:  # one unrenderable pair never stops the evaluation
-            log.warning("pair %s: re-render failed: %s", pair_id, exc)
-            continue
-        rerender_pairs[method_key] += 1
-        scores[method_key]["rerender_rmse"][exemplar.id].append(rmse)
-        scores[method_key]["rerender_ssim"][exemplar.id].append(ssim)
+        if pair.exemplar_rank in (None, 1) and rerender.wants(method_key):
+            rerendered = partial(rerender.error, session, pair, exemplar, method_key, chosen)
+            for suffix, errors in rendered_variants(rerendered, refined, refines).items():
+                if errors is not None:
+                    observed[f"rerender_rmse{suffix}"][exemplar.id].append(errors[0])
+                    observed[f"rerender_ssim{suffix}"][exemplar.id].append(errors[1])
     return {k: {metric: dict(obs) for metric, obs in v.items()} for k, v in scores.items()}
 
 

@@ -23,6 +23,7 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.groundtruth import TruthEntry
+from photoshape_flow.pipeline.rerender_eval import MaterialSpecs, Refinements, ShapeMeshes
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -81,31 +82,17 @@ class Relighter:
         row = held_out_envmap(session)
         self.envmap_name = row.name if row is not None else None
         self.envmap = EnvmapSpec(store.resolve(row.blob)) if row is not None else None
-        self.meshes: dict[int, Any] = {}
-        self.materials: dict[int, Any] = {}
+        self.meshes = ShapeMeshes(store)
+        self.specs = MaterialSpecs(store)
 
-    def _mesh(self, session: Session, shape_id: int) -> Any:
-        from photoshape_flow.geometry.mesh import ShapeMesh
-
-        if shape_id not in self.meshes:
-            self.meshes[shape_id] = ShapeMesh.from_npz_bytes(
-                self.store.read_bytes(session.get(m.Shape, shape_id).mesh_blob))
-        return self.meshes[shape_id]
-
-    def _material(self, session: Session, material_id: int) -> Any:
-        if material_id not in self.materials:
-            from photoshape_flow.pipeline.training_renders import material_spec
-
-            self.materials[material_id] = material_spec(session.get(m.Material, material_id), self.store)
-        return self.materials[material_id]
-
-    def views(self, session: Session, pair: m.Pair, materials: Mapping[int, int | None]) -> list[tuple[Any, Any]]:
+    def views(self, session: Session, pair: m.Pair, materials: Mapping[int, int | None],
+              refinements: Refinements | None = None) -> list[tuple[Any, Any]]:
         """(sRGB uint8, alpha mask) of each novel view."""
         from photoshape_flow.align.partmap import zoom_to_fit
         from photoshape_flow.render import Camera
 
-        mesh = self._mesh(session, pair.shape_id)
-        specs = [self._material(session, mid) if (mid := materials.get(p.index)) else None for p in mesh.parts]
+        mesh = self.meshes.get(session, pair.shape_id)
+        specs = self.specs.for_parts(session, mesh.parts, materials, refinements)
         out = []
         for turn in NOVEL_VIEWS_DEG:
             camera = zoom_to_fit(mesh, Camera(pair.azimuth + math.radians(turn), pair.elevation,
@@ -116,10 +103,10 @@ class Relighter:
 
 
 def relighting_error(relighter: Relighter, session: Session, pair: m.Pair, predicted: Mapping[int, int | None],
-                     truth_views: list[tuple[Any, Any]]) -> float:
+                     truth_views: list[tuple[Any, Any]], refinements: Refinements | None = None) -> float:
     """Mean over the novel views of the silhouette RMSE between the predicted and the true render."""
     values = [silhouette_rmse(p[0], t[0], t[1] | p[1])
-              for p, t in zip(relighter.views(session, pair, predicted), truth_views, strict=True)]
+              for p, t in zip(relighter.views(session, pair, predicted, refinements), truth_views, strict=True)]
     finite = [v for v in values if math.isfinite(v)]
     return float(np.mean(finite)) if finite else float("nan")
 
@@ -142,7 +129,9 @@ class RelightingScores:
         return bool(truth.in_collection) and shape is not None and shape.source_id == truth.shape
 
     def error(self, session: Session, pair: m.Pair, method_key: str, chosen: dict[int, int | None],
-              truth: TruthEntry) -> float | None:
+              truth: TruthEntry, refinements: Refinements | None = None) -> float | None:
+        """The pair's relighting error with `chosen` materials (refined where `refinements` say);
+        None when no true render can be made or a render fails."""
         try:
             if self.relighter is None:
                 self.relighter = Relighter(session, self.store, self.size, self.spp)
@@ -151,9 +140,9 @@ class RelightingScores:
                 self.truth_views[pair.id] = None if true is None else self.relighter.views(session, pair, true)
             if self.truth_views[pair.id] is None:
                 return None
-            value = relighting_error(self.relighter, session, pair, chosen, self.truth_views[pair.id])
+            value = relighting_error(self.relighter, session, pair, chosen, self.truth_views[pair.id], refinements)
         except Exception as exc:  # one unrenderable pair never stops the evaluation
             log.warning("pair %s: relighting render failed: %s", pair.id, exc)
             return None
-        self.pairs[method_key] += 1
+        self.pairs[method_key] += not refinements  # the refined render of a counted pair is not another pair
         return value if math.isfinite(value) else None
