@@ -98,7 +98,7 @@ class FitConfig:
     The cost weights and the scores' temperature are fitted per classifier on `calibration_cases`
     validation renders made to look like aligned product photos (`pipeline.fit_calibration`,
     docs/decisions.md D34), never on exemplars or evaluation worlds; the blur is the one of
-    `calibration_blurs` with the lowest held-out log-loss on those renders. The four weights and `blur` are the
+    `calibration_blurs` with the lowest held-out log-loss on those renders. The five weights and `blur` are the
     hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or no
     validation render yields a usable case; they also light and expose the calibration's own cases.
     """
@@ -115,6 +115,8 @@ class FitConfig:
     color_weight: float = 1.0  # CIELAB mean
     contrast_weight: float = 0.5  # CIELAB standard deviation
     gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales
+    highlight_weight: float = 0.0  # L* 90th/99th percentiles above the median (gloss); the calibration may
+    #                                raise it (hand-set 0: fitted to 0 on the small demo's validation renders, D38)
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
     # refinement of the winners (`fit.refine`, docs/decisions.md D35): only for the pairs publish uses

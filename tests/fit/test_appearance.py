@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, to_lab
+from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, terms, to_lab
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.select import rank_candidates, render_slots, scores_of
 
@@ -19,6 +19,23 @@ def _square(size: int = 40, lo: int = 8, hi: int = 32) -> np.ndarray:
 
 def _flat(rgb: tuple[int, int, int], size: int = 40) -> np.ndarray:
     return np.broadcast_to(np.array(rgb, np.uint8), (size, size, 3)).copy()
+
+
+def test_a_few_highlights_are_the_highlight_terms_not_the_colours() -> None:
+    """A glossy region (5% of pixels a bright highlight on a slightly darker base) against a matte one
+    of the same mean L*: the colour term barely sees it, the highlight term (99th percentile above the
+    median) sees a 40-L* tail and is the largest of the four."""
+    rng = np.random.default_rng(1)
+    lab = np.zeros((40, 40, 3), np.float32)
+    matte, glossy = lab.copy(), lab.copy()
+    matte[..., 0] = 50.0 + rng.uniform(-2.0, 2.0, (40, 40))
+    glossy[..., 0] = np.where(rng.random((40, 40)) < 0.05, 90.0, 48.0)
+    mask = _square()
+    a, b = appearance(matte, mask), appearance(glossy, mask)
+    assert a is not None and b is not None
+    color, contrast, gradient, highlight = terms(a, b)
+    assert color < 0.3 and highlight > 3.0 and highlight > max(contrast, gradient)
+    assert b.highlight[1] == pytest.approx(42.0) and a.highlight[1] < 2.5
 
 
 def test_distance_is_zero_for_itself_and_tolerates_a_shifted_region() -> None:

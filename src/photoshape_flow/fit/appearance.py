@@ -6,7 +6,10 @@ a few pixels, the shape is only a look-alike), so the distance compares distribu
 - colour: the mean and the standard deviation of CIELAB over the region (the material's albedo
   under the estimated lighting, and its shading/texture contrast);
 - texture: the mean and the standard deviation of the gradient magnitude of L* at two scales (full
-  resolution and half), which separate smooth plastic or metal from wood grain or woven fabric.
+  resolution and half), which separate smooth plastic or metal from wood grain or woven fabric;
+- highlights: how far the bright tail of L* reaches above its median (90th and 99th percentiles minus
+  the median), which separates glossy materials, whose few highlight pixels barely move the mean and
+  the standard deviation, from matte ones of the same colour.
 
 Each term is divided by a fixed scale (a just-noticeable CIELAB difference of about 10 for colour,
 5 L* units per pixel for gradients) so the weights of `Weights` are comparable; the weights are
@@ -17,7 +20,7 @@ boundary pixels, where the alignment error and anti-aliasing live, do not count.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -34,16 +37,19 @@ class Weights:
     color: float = 1.0  # CIELAB mean
     contrast: float = 0.5  # CIELAB standard deviation
     gradient: float = 0.5  # L* gradient-magnitude statistics, two scales
+    highlight: float = 0.0  # L* upper percentiles above the median (counts once fitted: D38)
 
 
 @dataclass(frozen=True)
 class Appearance:
-    """Statistics of one region: CIELAB mean and std (3 each), gradient mean/std at two scales (4)."""
+    """Statistics of one region: CIELAB mean and std (3 each), gradient mean/std at two scales (4), the
+    L* 90th and 99th percentiles above the median (2)."""
 
     lab_mean: np.ndarray
     lab_std: np.ndarray
     gradient: np.ndarray
     pixels: int
+    highlight: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 def srgb_float(rgb: np.ndarray) -> np.ndarray:
@@ -105,23 +111,26 @@ def appearance(lab: np.ndarray, mask: np.ndarray) -> Appearance | None:
     coarse = _gradient_magnitude(half)[erode(half_mask, 1)] if half_mask.any() else fine
     coarse = coarse if coarse.size else fine
     gradient = np.array([fine.mean(), fine.std(), coarse.mean(), coarse.std()], np.float64)
-    return Appearance(pixels.mean(axis=0), pixels.std(axis=0), gradient, n)
+    p50, p90, p99 = np.percentile(pixels[:, 0], [50.0, 90.0, 99.0])
+    return Appearance(pixels.mean(axis=0), pixels.std(axis=0), gradient, n, np.array([p90 - p50, p99 - p50]))
 
 
 def terms(a: Appearance, b: Appearance) -> np.ndarray:
-    """The three unweighted distance terms (colour, contrast, gradient), each over its fixed scale.
+    """The four unweighted distance terms (colour, contrast, gradient, highlight), each over its fixed scale.
 
     Kept apart so the weights can be fitted on validation renders (`fit.calibrate`).
     """
     return np.array([float(np.linalg.norm(a.lab_mean - b.lab_mean)) / LAB_SCALE,
                      float(np.linalg.norm(a.lab_std - b.lab_std)) / LAB_SCALE,
-                     float(np.linalg.norm(a.gradient - b.gradient)) / GRADIENT_SCALE])
+                     float(np.linalg.norm(a.gradient - b.gradient)) / GRADIENT_SCALE,
+                     float(np.linalg.norm(a.highlight - b.highlight)) / LAB_SCALE])
 
 
 def weigh(values: np.ndarray, weights: Weights) -> float:
     """The weighted sum of `terms`."""
-    color, contrast, gradient = (float(v) for v in values)
-    return weights.color * color + weights.contrast * contrast + weights.gradient * gradient
+    color, contrast, gradient, highlight = (float(v) for v in values)
+    return (weights.color * color + weights.contrast * contrast + weights.gradient * gradient
+            + weights.highlight * highlight)
 
 
 def distance(a: Appearance, b: Appearance, weights: Weights = Weights()) -> float:

@@ -168,7 +168,7 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
     regions = {i: erode(ids == i, settings.erode) for i in textured}
     photo_lab = scene.photo_lab
     photo_orientation = {i: orientation(photo_lab, scene.masks[i]) for i in textured}
-    weights = Weights(color=0.0, contrast=0.5, gradient=1.0)
+    weights = Weights(color=0.0, contrast=0.5, gradient=1.0, highlight=0.0)  # placement only: texture terms
     costs: dict[int, dict[tuple[float, float], float]] = {i: {} for i in textured}
 
     def measure(points: Mapping[int, tuple[float, float]]) -> None:

@@ -64,7 +64,7 @@ from photoshape_flow.vocab import STATUS_OK
 log = logging.getLogger(__name__)
 
 METHOD = "fit"
-CODE_VERSION = "fit-2"  # fit-2: fitted weights and temperature (D34)
+CODE_VERSION = "fit-3"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38)
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
 
 
@@ -83,7 +83,7 @@ class FitSummary:
 
 def weights_of(cfg: FitConfig) -> Weights:
     """The profile's hand-set distance weights (the fallback when no fitted ones are stored)."""
-    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight)
+    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight)
 
 
 # -- what one pair is made of ----------------------------------------------------------------------------
@@ -175,7 +175,7 @@ class FitContext:
         if self.calibration is None:
             return weights_of(self.cfg)
         w = self.calibration["weights"]
-        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]))
+        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]), float(w["highlight"]))
 
     @property
     def prior_weight(self) -> float:
@@ -209,7 +209,8 @@ def weights_report(ctx: FitContext) -> dict[str, Any]:
     w = ctx.weights
     out: dict[str, Any] = {"source": "hand-set" if ctx.calibration is None else "fitted",
                            "color": round(w.color, 4), "contrast": round(w.contrast, 4),
-                           "gradient": round(w.gradient, 4), "prior": round(ctx.prior_weight, 4),
+                           "gradient": round(w.gradient, 4), "highlight": round(w.highlight, 4),
+                           "prior": round(ctx.prior_weight, 4),
                            "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
     if ctx.calibration is not None:
         out["cases"] = ctx.calibration.get("cases")

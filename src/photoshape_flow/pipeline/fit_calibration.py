@@ -202,7 +202,8 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering,
 
 def hand_set(cfg: Any) -> np.ndarray:
     """The profile's weights in `fit.calibrate.TERMS` order (temperature 1)."""
-    return np.array([cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.prior_weight], np.float64)
+    return np.array([cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight,
+                     cfg.prior_weight], np.float64)
 
 
 def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:
