@@ -85,10 +85,12 @@ def truth_envmap(truth: TruthEntry, envmap_dir: Path | None) -> Any:
     light = truth.lighting
     if light is None:
         return None
-    path = light.path or (envmap_dir / f"{light.envmap}.hdr" if envmap_dir is not None else None)
-    if path is None or not path.is_file():
-        return None
-    return EnvmapSpec(path, scale=light.scale, rotation=light.rotation)
+    tried = [light.path] if light.path is not None else []
+    if envmap_dir is not None:  # a name, or a file the ground truth's folder does not hold
+        name = Path(light.envmap).name
+        tried += [envmap_dir / name, envmap_dir / f"{name}.hdr"]
+    path = next((p for p in tried if p.is_file()), None)
+    return None if path is None else EnvmapSpec(path, scale=light.scale, rotation=light.rotation)
 
 
 def with_labels(ctx: FitContext, data: PairData, labels: np.ndarray, min_pixels: int = 12) -> PairData:
@@ -183,7 +185,7 @@ def measure(profile: str, overrides: list[str], groundtruth: Path, envmap_dir: P
             except ValueError as exc:
                 print(f"pair {pair.id}: skipped ({exc})")
                 continue
-            counts["lighting"] += truth.lighting is not None
+            counts["lighting"] += truth_envmap(truth, envmap_dir) is not None
             counts["part_mask"] += truth.mask is not None and truth.mask.kind == "part"
             score_pair(ctx, session, data, truth, scored, envmap_dir, obs)
         session.rollback()
