@@ -10,6 +10,7 @@ weights of the classifier's calibration):
 
     fit        the stage as it runs: the exemplar's estimated lighting, the CRF part map
     gt-light   the truth's envmap, rotation and scale instead of the estimate (exposure re-solved)
+    gt-envmap  the truth's envmap file, its rotation and exposure searched as the stage searches its own
     gt-mask    the photo's part regions from the truth's part mask instead of the CRF map
     gt-both    both
 
@@ -42,7 +43,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.bootstrap import difference_interval, mean_interval
 from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
 from photoshape_flow.fit.appearance import erode
-from photoshape_flow.fit.scene import FitScene
+from photoshape_flow.fit.scene import FitScene, estimate_lighting
 from photoshape_flow.fit.select import rank_candidates
 from photoshape_flow.pipeline.evaluate import pair_truths
 from photoshape_flow.pipeline.fit import (
@@ -60,7 +61,7 @@ from photoshape_flow.pipeline.inference import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.store import BlobStore
 
-CONDITIONS = ("fit", "gt-light", "gt-mask", "gt-both")
+CONDITIONS = ("fit", "gt-light", "gt-envmap", "gt-mask", "gt-both")
 Observations = dict[str, dict[str, dict[int, list[float]]]]  # condition -> figure -> exemplar -> values
 
 
@@ -107,6 +108,19 @@ def with_labels(ctx: FitContext, data: PairData, labels: np.ndarray, min_pixels:
                                         scene.blur), data.rows, data.source_hash)
 
 
+def searched(ctx: FitContext, data: PairData, truth_env: Any) -> tuple[Any, float]:
+    """The truth's envmap (its file and strength) at the rotation and exposure the stage's own search finds
+    for it (`fit.rotations` azimuths, the ranking's first materials): separates "which light" from "how
+    it is turned and exposed"."""
+    from dataclasses import replace
+
+    turned = {0: lambda rotation: replace(truth_env, rotation=rotation)}
+    materials = [ctx.spec(data.rank1().get(p.index)) for p in data.scene.mesh.parts]
+    best, scale, _, _ = estimate_lighting(ctx.frame, data.scene, materials, turned, ctx.cfg.rotations, ctx.weights,
+                                          None, ctx.cfg.erode)
+    return turned[0](best.rotation), scale
+
+
 def winners(ctx: FitContext, data: PairData, light: dict[str, Any], envmap: Any) -> tuple[dict[int, int], dict]:
     """Each observed part's fit winner under the given lighting, and its candidates."""
     candidates = candidates_of(ctx, data)
@@ -125,17 +139,19 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
     labels = truth_part_map(truth, exemplar, index_of, ctx.cfg.size)
     gt_data = with_labels(ctx, data, labels) if labels is not None else None
     gt_env = truth_envmap(truth, envmap_dir)
-    runs = {"fit": (data, None)}
+    # (data, envmap, starting exposure): the truth's light starts from exposure 1 (its scale is the
+    # photo's); the truth's envmap at a searched rotation from the search's exposure; the rounds re-solve it
+    runs: dict[str, tuple[PairData, Any, float]] = {"fit": (data, None, float(light.get("exposure", 1.0)))}
     if gt_env is not None:
-        runs["gt-light"] = (data, gt_env)
+        runs["gt-light"] = (data, gt_env, 1.0)
+        runs["gt-envmap"] = (data, *searched(ctx, data, gt_env))
     if gt_data is not None:
-        runs["gt-mask"] = (gt_data, None)
+        runs["gt-mask"] = (gt_data, None, float(light.get("exposure", 1.0)))
     if gt_env is not None and gt_data is not None:
-        runs["gt-both"] = (gt_data, gt_env)
+        runs["gt-both"] = (gt_data, gt_env, 1.0)
     classifier_first = {i: rows[0].material_id for i, rows in data.rows.items() if rows}
-    for name, (pair_data, envmap) in runs.items():
-        # the truth's light starts from exposure 1 (its scale is the photo's); the rounds re-solve it
-        chosen, candidates = winners(ctx, pair_data, light if envmap is None else {**light, "exposure": 1.0}, envmap)
+    for name, (pair_data, envmap, exposure) in runs.items():
+        chosen, candidates = winners(ctx, pair_data, {**light, "exposure": exposure}, envmap)
         for index, (material, substance) in scored.items():
             if index not in chosen:
                 continue
