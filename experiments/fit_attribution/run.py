@@ -37,7 +37,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from experiments.common import results_dir
-from photoshape_flow.align.partmap import crop_square, resize_labels
+from photoshape_flow.align.partmap import resize_labels
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.bootstrap import difference_interval, mean_interval
@@ -45,7 +45,7 @@ from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_
 from photoshape_flow.fit.appearance import erode
 from photoshape_flow.fit.scene import FitScene, estimate_lighting
 from photoshape_flow.fit.select import rank_candidates
-from photoshape_flow.pipeline.evaluate import pair_truths
+from photoshape_flow.pipeline.evaluate import pair_truths, truth_labels
 from photoshape_flow.pipeline.fit import (
     ALIGNMENT_METHOD,
     FitContext,
@@ -66,17 +66,15 @@ Observations = dict[str, dict[str, dict[int, list[float]]]]  # condition -> figu
 
 
 def truth_part_map(truth: TruthEntry, exemplar: m.Exemplar, index_of: dict[str, int], size: int) -> np.ndarray | None:
-    """The truth's part mask as the pair's part indices (-1 elsewhere) in the fit frame; None without a part mask."""
+    """The truth's part mask as the pair's part indices (-1 elsewhere) in the fit frame; None without a part mask.
+
+    `truth_labels` crops it to the stored exemplar frame, its labels numbering the parts sorted by name."""
     if truth.mask is None or truth.mask.kind != "part":
         return None
-    native = truth.load_mask()
-    native = native[..., 0] if native.ndim == 3 else native
-    lut = np.full(int(max(max(truth.mask.values), int(native.max(initial=0)))) + 1, -1, np.int32)
-    for value, name in truth.mask.values.items():
-        lut[value] = index_of.get(name, -1)
-    crop = (exemplar.meta or {}).get("crop") or {"x0": 0, "y0": 0, "side": max(native.shape)}
-    cropped = crop_square(lut[native.astype(np.int64)], int(crop["x0"]), int(crop["y0"]), int(crop["side"]), fill=-1)
-    return resize_labels(cropped.astype(np.int32), size).astype(np.int32)
+    labels, _, _ = truth_labels(truth, exemplar)
+    names = sorted({p.name for p in truth.pixel_truths().values()})
+    lut = np.array([-1] + [index_of.get(n, -1) for n in names], np.int32)
+    return resize_labels(lut[labels], size).astype(np.int32)
 
 
 def truth_envmap(truth: TruthEntry, envmap_dir: Path | None) -> Any:
