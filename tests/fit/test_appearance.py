@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, terms, to_lab
+from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, soften, terms, to_lab
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.select import rank_candidates, render_slots, scores_of
 
@@ -105,3 +105,19 @@ def test_slots_switch_every_part_at_once_and_costs_rank_by_distance_and_prior() 
     assert [s.candidate.material_id for s in rank_candidates([a, b], {1: 1.0, 2: 0.9}, prior_weight=1.0)] == [1, 2]
     scores = scores_of(ranked)
     assert sum(scores) == pytest.approx(1.0) and scores == sorted(scores, reverse=True)
+
+
+def test_blur_inside_the_silhouette_keeps_a_thin_part_its_colour() -> None:
+    """A 3-pixel leg blurred on a white (photo) or a black (render) background: blurred inside the
+    silhouette, its colour is the same on both; blurred across it, each takes its own background."""
+    leg = np.zeros((32, 32), bool)
+    leg[4:28, 14:17] = True
+    colour = np.array([0.3, 0.2, 0.1], np.float32)
+    photo = np.where(leg[..., None], colour, 1.0).astype(np.float32)
+    render = np.where(leg[..., None], colour, 0.0).astype(np.float32)
+    inside = [soften(image, 1.5, leg)[leg].mean(axis=0) for image in (photo, render)]
+    np.testing.assert_allclose(inside[0], colour, atol=1e-5)
+    np.testing.assert_allclose(inside[1], colour, atol=1e-5)
+    across = [soften(image, 1.5)[leg].mean(axis=0) for image in (photo, render)]
+    assert across[0][0] > colour[0] + 0.1 and across[1][0] < colour[0] - 0.05
+    np.testing.assert_array_equal(soften(photo, 1.5, leg)[~leg], photo[~leg])  # outside: untouched

@@ -70,15 +70,17 @@ class FrameRenderer:
         zoomed = self._frame(mesh, camera)[0]
         return GradientScene(self.renderer, mesh, materials, zoomed, envmap, self.render_size, max_depth)
 
-    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
+    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
+               uv_transforms: Sequence[Any] | None = None) -> np.ndarray:
         """(size, size, 3) linear radiance in the frame, un-premultiplied (background 0).
 
         Un-premultiplied so that a thin part's edge pixels carry the part's colour, not a blend with
         the (black) background: the photo's regions exclude its background instead (`FitScene`).
+        `uv_transforms` (one per mesh part, None: the material's own scale) as `Renderer.beauty`.
         """
         zoomed, box, _ = self._frame(mesh, camera)
         result = self.renderer.beauty(mesh, list(materials), zoomed, envmap, size=self.render_size, spp=self.spp,
-                                      background="transparent", seed=0)
+                                      background="transparent", seed=0, uv_transforms=uv_transforms)
         size = (self.size, self.size)
         rgb = cv2.resize(crop_square(result.hdr, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
         alpha = cv2.resize(crop_square(result.alpha, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
@@ -111,12 +113,13 @@ class FitScene:
             region = erode((labels == index) & inside, erode_pixels)
             if int(region.sum()) >= min_pixels:
                 masks[index] = region
-        linear = soften(lt.photo_linear(photo_srgb), blur)
+        linear = soften(lt.photo_linear(photo_srgb), blur, inside)
         return cls(mesh, camera, linear, to_lab(lt.exposed_srgb(linear, 1.0)), masks, blur)
 
     def render(self, frame: FrameRenderer, materials: Sequence[Any], envmap: Any) -> np.ndarray:
         """A render of the scene's shape in the frame, softened like the photo (linear RGB)."""
-        return soften(frame.render(self.mesh, materials, self.camera, envmap), self.blur)
+        return soften(frame.render(self.mesh, materials, self.camera, envmap), self.blur,
+                      frame.part_ids(self.mesh, self.camera) > 0)
 
     @cached_property
     def photo_stats(self) -> dict[int, Appearance]:

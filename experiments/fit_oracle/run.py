@@ -1,0 +1,261 @@
+"""What limits fit's choice where everything can be made true? The calibration's cases with each nuisance removed.
+
+    python -m experiments.fit_oracle.run --profile small
+    python -m experiments.fit_oracle.run --profile small --conditions est,deg,mis,def --probe embedding
+
+The fit calibration (`pipeline.fit_calibration`) turns validation renders (our renderer, library
+materials, val shapes under val envmaps) into aligned "photos" and measures every candidate as the
+stage does. Here each nuisance between such a photo and the render of its true material can be
+switched off, one condition = four switches, comma-separated:
+
+    lighting   est: the stage's estimate over the training envmaps | true: the render's own envmap,
+               rotation and scale (exposure still solved)
+    photo      deg: degraded like a demo exemplar (exposure, white balance, blur, noise, JPEG) | clean
+    mask       mis: the part map misaligned as fine alignment errs | exact
+    uv         def: candidates at their materials' own UV scale | uv: at the render's per-part UV transform
+
+With `true,clean,exact,uv` the render of the true material repeats the photo up to sampling noise,
+so whatever the statistics still miss there is the comparison's own limit. For each condition:
+2-fold held-out log-loss and top-1 of the fitted cost (folds by render, `fit_calibration.held_out`),
+the classifier prior alone, and the mean number of candidates. `--probe` adds one more term to the
+cost, to measure a candidate term before it enters `fit.appearance`:
+
+    embedding  1 - cos of the material classifier's pooled features of the photo's and the render's part
+    layout     mean CIELAB difference per pixel after a blur of `--layout-sigma` (the shading's layout)
+
+Read-only. Output: `<data root>/experiments/fit_oracle/results.json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import torch
+
+from experiments.common import results_dir
+from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.fit import calibrate as cal
+from photoshape_flow.fit import lighting as lt
+from photoshape_flow.fit import scene as sc
+from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
+from photoshape_flow.hashing import item_seed
+from photoshape_flow.pipeline import fit_calibration as fc
+from photoshape_flow.pipeline.fit import FitContext, PairData, candidates_of, lighting_estimate
+from photoshape_flow.pipeline.inference import resolve_classifier
+from photoshape_flow.profiles import resolve_profile
+from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
+from photoshape_flow.render.specs import linear_to_srgb
+from photoshape_flow.store import BlobStore
+from photoshape_flow.synth.spec import RenderSpec
+
+DEFAULT_CONDITIONS = ("est,deg,mis,def", "true,deg,mis,def", "est,clean,exact,def", "true,clean,exact,def",
+                      "true,clean,exact,uv")
+
+
+class UVFrame(sc.FrameRenderer):
+    """The stage's frame renderer with the validation render's per-part UV transforms (`uv` condition)."""
+
+    def __init__(self, plain: sc.FrameRenderer):
+        super().__init__(plain.renderer, plain.size, plain.spp)
+        self.uv: dict[int, Any] | None = None
+
+    def render(self, mesh: Any, materials: Any, camera: Any, envmap: Any, uv_transforms: Any = None) -> np.ndarray:
+        uvs = None if self.uv is None else [self.uv.get(p.index) for p in mesh.parts]
+        return super().render(mesh, materials, camera, envmap, uv_transforms=uvs)
+
+
+class Embedder:
+    """The material classifier's pooled features of image regions (L2-normalised, mirrored view averaged)."""
+
+    def __init__(self, classifier: Any):
+        self.classifier = classifier
+
+    @torch.inference_mode()
+    def __call__(self, srgb: np.ndarray, masks: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        keys = sorted(masks)
+        if not keys:
+            return {}
+        x = self.classifier.inputs(srgb.astype(np.float32), [masks[k] for k in keys])
+        f = self.classifier.model.features(torch.cat([x, x.flip(-1)]))
+        f = torch.nn.functional.normalize(f[: len(keys)], dim=1) + torch.nn.functional.normalize(f[len(keys):], dim=1)
+        f = torch.nn.functional.normalize(f, dim=1).numpy()
+        return {k: f[i] for i, k in enumerate(keys)}
+
+
+def probe_terms(probe: str, scene: sc.FitScene, foreground: np.ndarray, renders: sc.CandidateRenders,
+                exposure: float, erode_pixels: int, embed: Embedder | None,
+                sigma: float) -> dict[tuple[int, int], float]:
+    """(part, candidate) -> the probe term of that candidate's render."""
+    out: dict[tuple[int, int], float] = {}
+    inside = renders.ids > 0
+    if probe == "embedding":
+        assert embed is not None
+        photo = embed(lt.exposed_srgb(scene.photo_linear, 1.0), scene.masks)
+    else:
+        photo_lab = sc.to_lab(lt.exposed_srgb(sc.soften(scene.photo_linear, sigma, foreground), 1.0))
+    for k, linear in enumerate(renders.renders):
+        shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
+        regions = {i: r for i in shown if (r := sc.erode(renders.ids == i, erode_pixels)).any()}
+        if probe == "embedding":
+            srgb = np.where(inside[..., None], lt.exposed_srgb(linear, exposure), 1.0)
+            assert embed is not None
+            feats = embed(srgb, regions)
+            out.update({(i, shown[i]): 1.0 - float(photo[i] @ f) for i, f in feats.items() if i in photo})
+        else:
+            lab = sc.to_lab(lt.exposed_srgb(sc.soften(linear, sigma, inside), exposure))
+            for i, region in regions.items():
+                both = scene.masks[i] & region if (scene.masks[i] & region).sum() >= 12 else scene.masks[i]
+                out[(i, shown[i])] = float(np.linalg.norm(lab[both] - photo_lab[both], axis=1).mean()) / 10.0
+    return out
+
+
+def clean_photo(hdr: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """The validation render as 8-bit sRGB on white, without the exemplar degradation."""
+    covered = (ids > 0)[..., None]
+    linear = np.where(covered, np.minimum(hdr[..., :3], 2.0), 1.0)
+    return np.clip(np.round(linear_to_srgb(linear) * 255.0), 0, 255).astype(np.uint8)
+
+
+class Oracle:
+    """One data root's fit context, ranker and envmaps; `cases` builds one render's cases under a condition."""
+
+    def __init__(self, settings: Settings, profile: str, overrides: list[str], probe: str | None, sigma: float):
+        self.settings = settings
+        self.cfg = resolve_profile(profile, overrides).profile.fit
+        self.store = BlobStore(settings.blob_root)
+        with session_scope(settings.resolved_database_url) as session:
+            self.ctx = FitContext(session, self.store, resolve_classifier(session, None), self.cfg)
+            self.envmaps = {e.id: e.blob for e in session.query(m.Envmap).all()}
+        self.ranker = fc.RenderRanker(self.ctx, settings)
+        self.frame = UVFrame(self.ctx.frame)
+        self.ctx._frame = self.frame
+        self.probe, self.sigma = probe, sigma
+        self.embed = Embedder(self.ranker.model) if probe == "embedding" else None
+
+    def cases(self, row: m.Rendering, condition: str) -> list[cal.Case]:
+        lighting, photo_kind, mask, uv = condition.split(",")
+        spec = RenderSpec.from_dict(row.params)
+        truth = spec.material_by_index()
+        hdr, ids = self.store.load_image(row.blobs["hdr"]), self.store.load_image(row.blobs["part_ids"])
+        ids = ids[..., 0] if ids.ndim == 3 else ids
+        rng = np.random.default_rng(item_seed(self.settings.seed, "fit-calibration", row.kind, row.key))
+        seed = int(rng.integers(2**31 - 1))
+        photo = fc.as_photo(hdr, ids, seed) if photo_kind == "deg" else clean_photo(hdr, ids)
+        rgb, labels, foreground = frame(photo, ids, self.cfg.size)
+        error = sample_misalignment(rng, self.cfg.size)
+        labels = misalign(labels, error) if mask == "mis" else labels
+        with session_scope(self.settings.resolved_database_url) as session:
+            mesh = self.ctx.mesh(session.get(m.Shape, row.shape_id))
+        camera = Camera(spec.camera.azimuth, spec.camera.elevation, spec.camera.distance, spec.camera.fov)
+        present = sorted(int(i) for i in np.unique(labels) if i > 0 and int(i) in truth)
+        scene = sc.FitScene.from_photo(mesh, camera, rgb, labels, present, self.cfg.erode, blur=self.cfg.blur,
+                                       foreground=foreground)
+        rows = self.ranker.rank(rgb, {i: (labels == i) & foreground for i in scene.masks})
+        if not rows:
+            return []
+        data = PairData(m.Pair(shape_id=row.shape_id), scene, rows, None)
+        self.frame.uv = ({p.index: UVTransform(scale=p.uv.scale, rotation=p.uv.rotation, offset=tuple(p.uv.offset))
+                          for p in spec.parts} if uv == "uv" else None)
+        try:
+            return self._measure(row, spec, truth, scene, foreground, data, lighting == "true")
+        finally:
+            self.frame.uv = None
+
+    def _measure(self, row: m.Rendering, spec: RenderSpec, truth: dict[int, int], scene: sc.FitScene,
+                 foreground: np.ndarray, data: PairData, true_light: bool) -> list[cal.Case]:
+        ctx, cfg = self.ctx, self.cfg
+        candidates = candidates_of(ctx, data)
+        if not candidates:
+            return []
+        if true_light:
+            envmap = EnvmapSpec(self.store.resolve(self.envmaps[spec.envmap.envmap_id]), scale=spec.envmap.scale,
+                                rotation=spec.envmap.rotation)
+            materials = [ctx.spec(data.rank1().get(p.index)) for p in scene.mesh.parts]
+            ((_, exposure, _),) = sc.score_lighting(ctx.frame, scene, materials, [(None, envmap)], ctx.weights,
+                                                    cfg.erode)
+        else:
+            light = lighting_estimate(ctx, data)
+            envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+            exposure = float(light["exposure"])
+        renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap, cfg.erode)
+        _, exposure = sc.select_with_exposure(renders, scene, candidates, exposure, ctx.weights, ctx.prior_weight,
+                                              cfg.exposure_rounds, cfg.erode)
+        measured = sc.candidate_terms(renders, scene, exposure, cfg.erode)
+        extra = (probe_terms(self.probe, scene, foreground, renders, exposure, cfg.erode, self.embed, self.sigma)
+                 if self.probe else {})
+        cases = []
+        for index, options in sorted(candidates.items()):
+            ids = [c.material_id for c in options]
+            rows = {c.material_id: t if self.probe is None else np.append(t, extra.get((index, c.material_id), np.nan))
+                    for c in options if (t := measured.get(index, {}).get(c.material_id)) is not None}
+            if truth[index] not in ids or not rows:
+                continue
+            fill = np.nanmean(np.array(list(rows.values())), axis=0)  # unmeasured: the mean, as the stage fills it
+            features = np.array([[*np.where(np.isnan(r := rows.get(c.material_id, fill)), fill, r), c.prior_cost]
+                                 for c in options])
+            cases.append(cal.Case(features, ids.index(truth[index]), group=f"{row.kind}/{row.key}"))
+        return cases
+
+
+def summary(cases: list[cal.Case], cfg: Any, terms: tuple[str, ...]) -> dict[str, Any]:
+    """Held-out figures of the fitted cost, and each term alone (in-sample temperature: for comparison only)."""
+    alone = {}
+    for j, name in enumerate(terms):
+        w = np.zeros(len(terms))
+        w[j] = 1.0
+        s = cal.score(w / cal.fit_temperature(cases, w), cases)
+        alone[name] = {"log_loss": round(s.log_loss, 4), "top1": round(s.top1, 4)}
+    return {"held_out": fc.held_out(cases, cfg), "alone": alone,
+            "mean_candidates": round(float(np.mean([c.features.shape[0] for c in cases])), 2)}
+
+
+def with_terms(terms: tuple[str, ...], hand_set: Callable[[Any], np.ndarray]) -> None:
+    """Make the calibration's fit and its hand-set centre take the probe's column (before `prior`)."""
+    cal.TERMS = terms
+    if len(terms) > 5:
+        fc.hand_set = lambda cfg: np.insert(hand_set(cfg), 4, 0.0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--profile", default="small")
+    parser.add_argument("--cases", type=int, default=None, help="validation renders (default: the profile's)")
+    parser.add_argument("--conditions", default=";".join(DEFAULT_CONDITIONS), help="';'-separated conditions")
+    parser.add_argument("--probe", choices=("embedding", "layout"), default=None)
+    parser.add_argument("--layout-sigma", type=float, default=2.0)
+    parser.add_argument("--set", action="append", default=[], help="profile override, e.g. fit.blur=1.0")
+    args = parser.parse_args()
+    settings = get_settings()
+    oracle = Oracle(settings, args.profile, args.set, args.probe, args.layout_sigma)
+    terms = (*cal.TERMS[:4], args.probe, "prior") if args.probe else cal.TERMS
+    with_terms(terms, fc.hand_set)
+    count = args.cases if args.cases is not None else oracle.cfg.calibration_cases
+    with session_scope(settings.resolved_database_url) as session:
+        renders = fc.validation_renders(session, count, settings.seed)
+        session.expunge_all()
+    results: dict[str, Any] = {"profile": args.profile, "overrides": args.set, "probe": args.probe,
+                               "renders": len(renders), "blur": oracle.cfg.blur, "conditions": {}}
+    for condition in args.conditions.split(";"):
+        cases: list[cal.Case] = []
+        for row in renders:
+            try:
+                cases += oracle.cases(row, condition)
+            except (ValueError, OSError) as exc:
+                print(f"{row.kind}/{row.key}: skipped ({exc})")
+        results["conditions"][condition] = summary(cases, oracle.cfg, terms)
+        print(condition, json.dumps(results["conditions"][condition]), flush=True)
+    out = results_dir(settings, "fit_oracle")
+    out.mkdir(parents=True, exist_ok=True)
+    name = "results.json" if not args.probe else f"results-{args.probe}.json"
+    (out / name).write_text(json.dumps(results, indent=2))
+    print(f"written {out / name}")
+
+
+if __name__ == "__main__":
+    main()
