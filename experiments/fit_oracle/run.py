@@ -65,9 +65,9 @@ class UVFrame(sc.FrameRenderer):
         super().__init__(plain.renderer, plain.size, plain.spp)
         self.uv: dict[int, Any] | None = None
 
-    def render(self, mesh: Any, materials: Any, camera: Any, envmap: Any, uv_transforms: Any = None) -> np.ndarray:
+    def render_rgba(self, mesh: Any, materials: Any, camera: Any, envmap: Any, uv_transforms: Any = None) -> np.ndarray:
         uvs = None if self.uv is None else [self.uv.get(p.index) for p in mesh.parts]
-        return super().render(mesh, materials, camera, envmap, uv_transforms=uvs)
+        return super().render_rgba(mesh, materials, camera, envmap, uv_transforms=uvs)
 
 
 class Embedder:
@@ -93,22 +93,23 @@ def probe_terms(probe: str, scene: sc.FitScene, foreground: np.ndarray, renders:
                 sigma: float) -> dict[tuple[int, int], float]:
     """(part, candidate) -> the probe term of that candidate's render."""
     out: dict[tuple[int, int], float] = {}
-    inside = renders.ids > 0
     if probe == "embedding":
         assert embed is not None
         photo = embed(lt.exposed_srgb(scene.photo_linear, 1.0), scene.masks)
     else:
-        photo_lab = sc.to_lab(lt.exposed_srgb(sc.soften(scene.photo_linear, sigma, foreground), 1.0))
-    for k, linear in enumerate(renders.renders):
+        photo_lab = sc.to_lab(lt.exposed_srgb(sc.soften(scene.photo_linear, sigma), 1.0))
+    for k, rgba in enumerate(renders.renders):
         shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
         regions = {i: r for i in shown if (r := sc.erode(renders.ids == i, erode_pixels)).any()}
+        alpha = rgba[..., 3:4]
+        linear = rgba[..., :3] * alpha * exposure + (1.0 - alpha) * scene.background  # as `FitScene.exposed_lab`
         if probe == "embedding":
-            srgb = np.where(inside[..., None], lt.exposed_srgb(linear, exposure), 1.0)
+            srgb = lt.exposed_srgb(linear, 1.0)
             assert embed is not None
             feats = embed(srgb, regions)
             out.update({(i, shown[i]): 1.0 - float(photo[i] @ f) for i, f in feats.items() if i in photo})
         else:
-            lab = sc.to_lab(lt.exposed_srgb(sc.soften(linear, sigma, inside), exposure))
+            lab = sc.to_lab(lt.exposed_srgb(sc.soften(linear, sigma), 1.0))
             for i, region in regions.items():
                 both = scene.masks[i] & region if (scene.masks[i] & region).sum() >= 12 else scene.masks[i]
                 out[(i, shown[i])] = float(np.linalg.norm(lab[both] - photo_lab[both], axis=1).mean()) / 10.0

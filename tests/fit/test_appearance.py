@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, soften, terms, to_lab
+from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, terms, to_lab
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.select import rank_candidates, render_slots, scores_of
 
@@ -107,17 +107,24 @@ def test_slots_switch_every_part_at_once_and_costs_rank_by_distance_and_prior() 
     assert sum(scores) == pytest.approx(1.0) and scores == sorted(scores, reverse=True)
 
 
-def test_blur_inside_the_silhouette_keeps_a_thin_part_its_colour() -> None:
-    """A 3-pixel leg blurred on a white (photo) or a black (render) background: blurred inside the
-    silhouette, its colour is the same on both; blurred across it, each takes its own background."""
-    leg = np.zeros((32, 32), bool)
-    leg[4:28, 14:17] = True
-    colour = np.array([0.3, 0.2, 0.1], np.float32)
-    photo = np.where(leg[..., None], colour, 1.0).astype(np.float32)
-    render = np.where(leg[..., None], colour, 0.0).astype(np.float32)
-    inside = [soften(image, 1.5, leg)[leg].mean(axis=0) for image in (photo, render)]
-    np.testing.assert_allclose(inside[0], colour, atol=1e-5)
-    np.testing.assert_allclose(inside[1], colour, atol=1e-5)
-    across = [soften(image, 1.5)[leg].mean(axis=0) for image in (photo, render)]
-    assert across[0][0] > colour[0] + 0.1 and across[1][0] < colour[0] - 0.05
-    np.testing.assert_array_equal(soften(photo, 1.5, leg)[~leg], photo[~leg])  # outside: untouched
+
+def test_a_render_is_blended_with_the_photos_background_at_its_silhouette() -> None:
+    """A thin part whose edge pixels the camera blended with a grey backdrop: the render (un-premultiplied,
+    with coverage) shows the same edge once `exposed_lab` blends it with the photo's measured background."""
+    from photoshape_flow.fit.scene import FitScene
+
+    size, colour, backdrop = 32, np.array([0.30, 0.20, 0.10]), np.array([0.8, 0.8, 0.8])
+    coverage = np.zeros((size, size), np.float32)
+    coverage[4:28, 14:17] = 1.0
+    coverage[4:28, 13] = coverage[4:28, 17] = 0.5  # anti-aliased edges
+    photo_linear = coverage[..., None] * colour + (1.0 - coverage[..., None]) * backdrop
+    photo = np.round(lt.linear_to_srgb(photo_linear) * 255).astype(np.uint8)
+    labels = (coverage > 0).astype(np.int32)
+    scene = FitScene.from_photo(None, None, photo, labels, [1], erode_pixels=0, foreground=labels > 0)
+    np.testing.assert_allclose(scene.background, backdrop, atol=0.01)
+    rgba = np.concatenate([np.where(coverage[..., None] > 0, colour, 0.0), coverage[..., None]], -1)
+    blended = scene.exposed_lab(rgba.astype(np.float32), 1.0)
+    edge = coverage == 0.5
+    assert float(np.abs(blended[edge] - scene.photo_lab[edge]).max()) < 1.0  # CIELAB units
+    unblended = to_lab(lt.exposed_srgb(rgba[..., :3], 1.0))
+    assert float(np.abs(unblended[edge] - scene.photo_lab[edge]).max()) > 10.0

@@ -75,28 +75,18 @@ def erode(mask: np.ndarray, pixels: int) -> np.ndarray:
     return eroded if eroded.sum() >= MIN_PIXELS else mask
 
 
-def soften(image: np.ndarray, sigma: float, inside: np.ndarray | None = None) -> np.ndarray:
-    """A Gaussian blur of `sigma` pixels (none when sigma <= 0), within `inside` when given.
+def soften(image: np.ndarray, sigma: float) -> np.ndarray:
+    """A Gaussian blur of `sigma` pixels (none when sigma <= 0).
 
-    Applied to the render and the photo alike before any statistic: a product photo is softer than a
-    path-traced render (lens, demosaicing, JPEG, a resize) and a low-spp render is noisier than a
-    photo; both differences live at the finest scale, where they would swamp the texture statistics.
-    With `inside` (the object's silhouette) the blur is a normalised convolution over the silhouette
-    only: the background never bleeds into the object, or a thin part (a leg, a frame bar) would
-    take the photo's white background in the photo and the render's black one in the render, and
-    its colour would be compared after mixing with two different backgrounds.
+    Applied to the photo and to every render alike (renders after they are blended with the photo's
+    background, `fit.scene.FitScene.exposed_lab`) before any statistic: a product photo is softer
+    than a path-traced render (lens, demosaicing, JPEG, a resize) and a low-spp render is noisier
+    than a photo; both differences live at the finest scale, where they would swamp the texture
+    statistics.
     """
     if sigma <= 0:
         return image
-    image = np.asarray(image, np.float32)
-    if inside is None:
-        return cv2.GaussianBlur(image, (0, 0), sigmaX=float(sigma))
-    weight = np.asarray(inside, np.float32)
-    blurred = cv2.GaussianBlur(image * (weight[..., None] if image.ndim == 3 else weight), (0, 0), sigmaX=float(sigma))
-    norm = cv2.GaussianBlur(weight, (0, 0), sigmaX=float(sigma))
-    norm = np.maximum(norm, 1e-6)[..., None] if image.ndim == 3 else np.maximum(norm, 1e-6)
-    mask = weight[..., None] > 0 if image.ndim == 3 else weight > 0
-    return np.where(mask, blurred / norm, image).astype(np.float32)
+    return cv2.GaussianBlur(np.asarray(image, np.float32), (0, 0), sigmaX=float(sigma))
 
 
 def _gradient_magnitude(lightness: np.ndarray) -> np.ndarray:

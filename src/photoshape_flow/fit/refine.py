@@ -40,8 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, to_lab
+from photoshape_flow.fit.appearance import Weights, appearance, distance, erode
 from photoshape_flow.render.specs import Refinement
 
 TEXTURED = ("albedo", "roughness", "normal")  # maps whose placement the UV transform moves
@@ -177,7 +176,7 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
         for i, (scale, rotation) in points.items():
             trial[positions[i]] = with_refinement(materials[positions[i]], Refinement(uv_scale=scale,
                                                                                       uv_rotation=rotation))
-        lab = to_lab(lt.exposed_srgb(scene.render(frame, trial, envmap), exposure))
+        lab = scene.exposed_lab(scene.render(frame, trial, envmap), exposure)
         for i, point in points.items():
             rendered = appearance(lab, regions[i])
             if rendered is not None:

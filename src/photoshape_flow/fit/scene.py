@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
@@ -24,6 +24,7 @@ from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.select import render_slots
 from photoshape_flow.imaging.squares import crop_square, square_box
 
+MIN_BACKGROUND = 12  # background pixels needed to measure the photo's background colour
 OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
 
 
@@ -70,12 +71,13 @@ class FrameRenderer:
         zoomed = self._frame(mesh, camera)[0]
         return GradientScene(self.renderer, mesh, materials, zoomed, envmap, self.render_size, max_depth)
 
-    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
-               uv_transforms: Sequence[Any] | None = None) -> np.ndarray:
-        """(size, size, 3) linear radiance in the frame, un-premultiplied (background 0).
+    def render_rgba(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
+                    uv_transforms: Sequence[Any] | None = None) -> np.ndarray:
+        """(size, size, 4): linear radiance in the frame, un-premultiplied (background 0), and coverage.
 
         Un-premultiplied so that a thin part's edge pixels carry the part's colour, not a blend with
-        the (black) background: the photo's regions exclude its background instead (`FitScene`).
+        the (black) background; the coverage lets `FitScene.exposed_lab` blend them with the photo's
+        own background instead, as the camera blended the photo's.
         `uv_transforms` (one per mesh part, None: the material's own scale) as `Renderer.beauty`.
         """
         zoomed, box, _ = self._frame(mesh, camera)
@@ -84,7 +86,13 @@ class FrameRenderer:
         size = (self.size, self.size)
         rgb = cv2.resize(crop_square(result.hdr, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
         alpha = cv2.resize(crop_square(result.alpha, *box, fill=0.0), size, interpolation=cv2.INTER_AREA)
-        return np.where(alpha[..., None] > 0.05, rgb / np.maximum(alpha, 0.05)[..., None], 0.0).astype(np.float32)
+        un = np.where(alpha[..., None] > 0.05, rgb / np.maximum(alpha, 0.05)[..., None], 0.0)
+        return np.concatenate([un, np.clip(alpha, 0.0, 1.0)[..., None]], axis=-1).astype(np.float32)
+
+    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
+               uv_transforms: Sequence[Any] | None = None) -> np.ndarray:
+        """(size, size, 3) linear radiance in the frame, un-premultiplied (background 0)."""
+        return self.render_rgba(mesh, materials, camera, envmap, uv_transforms)[..., :3]
 
 
 @dataclass
@@ -97,6 +105,7 @@ class FitScene:
     photo_lab: np.ndarray
     masks: dict[int, np.ndarray]  # observed part index -> region of the photo (eroded)
     blur: float = 0.0  # Gaussian sigma (pixels) applied to the photo and to every render (`soften`)
+    background: np.ndarray = field(default_factory=lambda: np.ones(3, np.float32))  # the photo's, linear RGB
 
     @classmethod
     def from_photo(cls, mesh: Any, camera: Any, photo_srgb: np.ndarray, labels: np.ndarray,
@@ -106,6 +115,8 @@ class FitScene:
 
         A part's region is its labels inside the foreground (the aligned map spills onto the
         background around thin parts), eroded; parts left with fewer than `min_pixels` are dropped.
+        The photo's background colour is the median of its pixels away from the foreground (white
+        when there are too few): renders are blended with it at their silhouette (`exposed_lab`).
         """
         inside = np.ones(labels.shape, bool) if foreground is None else np.asarray(foreground, bool)
         masks = {}
@@ -113,13 +124,28 @@ class FitScene:
             region = erode((labels == index) & inside, erode_pixels)
             if int(region.sum()) >= min_pixels:
                 masks[index] = region
-        linear = soften(lt.photo_linear(photo_srgb), blur, inside)
-        return cls(mesh, camera, linear, to_lab(lt.exposed_srgb(linear, 1.0)), masks, blur)
+        unblurred = lt.photo_linear(photo_srgb)
+        away = cv2.dilate(inside.astype(np.uint8), np.ones((7, 7), np.uint8)) == 0
+        background = np.median(unblurred[away], axis=0) if int(away.sum()) >= MIN_BACKGROUND else np.ones(3)
+        linear = soften(unblurred, blur)
+        return cls(mesh, camera, linear, to_lab(lt.exposed_srgb(linear, 1.0)), masks, blur,
+                   np.asarray(background, np.float32))
 
     def render(self, frame: FrameRenderer, materials: Sequence[Any], envmap: Any) -> np.ndarray:
-        """A render of the scene's shape in the frame, softened like the photo (linear RGB)."""
-        return soften(frame.render(self.mesh, materials, self.camera, envmap), self.blur,
-                      frame.part_ids(self.mesh, self.camera) > 0)
+        """A render of the scene's shape in the frame: (size, size, 4) un-premultiplied linear RGB and coverage."""
+        return frame.render_rgba(self.mesh, materials, self.camera, envmap)
+
+    def exposed_lab(self, rgba: np.ndarray, exposure: float) -> np.ndarray:
+        """CIELAB of a render (`render`) as the photo would show it: at `exposure`, over the photo's
+        background at the silhouette, softened like the photo.
+
+        Like for like at the silhouette: the photo's edge pixels are its object blended with its
+        background (coverage, lens, resize), so the render's are blended with the same colour, or a
+        thin part (a leg, a frame bar) would be compared in two different mixtures.
+        """
+        alpha = rgba[..., 3:4]
+        linear = rgba[..., :3] * (alpha * float(exposure)) + (1.0 - alpha) * self.background
+        return to_lab(lt.exposed_srgb(soften(linear, self.blur), 1.0))
 
     @cached_property
     def photo_stats(self) -> dict[int, Appearance]:
@@ -160,9 +186,9 @@ def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[An
     rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
     scored = []
     for hypothesis, envmap in hypotheses:
-        linear = scene.render(frame, materials, envmap)
-        scale = lt.exposure(lt.region_means(linear, rendered_masks), photo_means)
-        dists = region_distances(to_lab(lt.exposed_srgb(linear, scale)), ids, photo, sorted(scene.masks), weights,
+        rgba = scene.render(frame, materials, envmap)
+        scale = lt.exposure(lt.region_means(rgba[..., :3], rendered_masks), photo_means)
+        dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
                                  erode_pixels)
         sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
         loss = sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values()) if sizes else math.inf
@@ -203,7 +229,7 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
 class CandidateRenders:
     """The slot renders of one pair: which render shows each (part, candidate), and its rendered region's mean."""
 
-    renders: list[np.ndarray]  # linear RGB, softened like the photo
+    renders: list[np.ndarray]  # (size, size, 4) un-premultiplied linear RGB and coverage (`FitScene.render`)
     where: dict[int, dict[int, int]]  # part index -> candidate material -> index into `renders`
     means: dict[int, dict[int, tuple[np.ndarray, int]]]  # part index -> candidate -> (mean linear RGB, pixels)
     ids: np.ndarray  # the frame's part indices
@@ -221,14 +247,14 @@ def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, 
     regions = {i: erode(ids == i, erode_pixels) for i in candidates}
     out = CandidateRenders([], {i: {} for i in candidates}, {i: {} for i in candidates}, ids)
     for slot in render_slots(candidates):
-        linear = scene.render(frame, [spec_of(slot.get(p.index, base.get(p.index))) for p in scene.mesh.parts],
-                              envmap)
-        out.renders.append(linear)
+        rgba = scene.render(frame, [spec_of(slot.get(p.index, base.get(p.index))) for p in scene.mesh.parts], envmap)
+        out.renders.append(rgba)
         for index, material in slot.items():
             if material not in out.where[index]:
                 out.where[index][material] = len(out.renders) - 1
                 if regions[index].any():
-                    out.means[index][material] = (linear[regions[index]].mean(axis=0), int(regions[index].sum()))
+                    out.means[index][material] = (rgba[..., :3][regions[index]].mean(axis=0),
+                                                  int(regions[index].sum()))
     return out
 
 
@@ -237,11 +263,11 @@ def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float,
     """Part index -> {candidate material: its distance terms to the photo} with the renders at `exposure`."""
     photo = scene.photo_stats
     out: dict[int, dict[int, np.ndarray | None]] = {i: {} for i in renders.where}
-    for k, linear in enumerate(renders.renders):
+    for k, rgba in enumerate(renders.renders):
         shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
         if not shown:
             continue
-        lab = to_lab(lt.exposed_srgb(linear, exposure))
+        lab = scene.exposed_lab(rgba, exposure)
         for index, value in region_terms(lab, renders.ids, photo, sorted(shown), erode_pixels).items():
             out[index][shown[index]] = value
     return out

@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 
 METHOD = "fit"
 CODE_VERSION = "fit-4"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
-#                         fit-4: the blur stays inside the silhouette (D41)
+#                         fit-4: renders blended with the photo's background at the silhouette (D41)
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
 
 

@@ -71,10 +71,11 @@ class CachedFrame(FrameRenderer):
     def clear(self) -> None:
         self._cache = {}
 
-    def render(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any) -> np.ndarray:
-        key = repr((id(mesh), list(materials), camera, envmap))
+    def render_rgba(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
+                    uv_transforms: Sequence[Any] | None = None) -> np.ndarray:
+        key = repr((id(mesh), list(materials), camera, envmap, uv_transforms))
         if key not in self._cache:
-            self._cache[key] = super().render(mesh, materials, camera, envmap)
+            self._cache[key] = super().render_rgba(mesh, materials, camera, envmap, uv_transforms)
         return self._cache[key]
 
 
