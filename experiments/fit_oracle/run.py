@@ -88,7 +88,7 @@ class Embedder:
         return {k: f[i] for i, k in enumerate(keys)}
 
 
-def probe_terms(probe: str, scene: sc.FitScene, foreground: np.ndarray, renders: sc.CandidateRenders,
+def probe_terms(probe: str, scene: sc.FitScene, renders: sc.CandidateRenders,
                 exposure: float, erode_pixels: int, embed: Embedder | None,
                 sigma: float) -> dict[tuple[int, int], float]:
     """(part, candidate) -> the probe term of that candidate's render."""
@@ -164,12 +164,12 @@ class Oracle:
         self.frame.uv = ({p.index: UVTransform(scale=p.uv.scale, rotation=p.uv.rotation, offset=tuple(p.uv.offset))
                           for p in spec.parts} if uv == "uv" else None)
         try:
-            return self._measure(row, spec, truth, scene, foreground, data, lighting == "true")
+            return self._measure(row, spec, truth, scene, data, lighting == "true")
         finally:
             self.frame.uv = None
 
     def _measure(self, row: m.Rendering, spec: RenderSpec, truth: dict[int, int], scene: sc.FitScene,
-                 foreground: np.ndarray, data: PairData, true_light: bool) -> list[cal.Case]:
+                 data: PairData, true_light: bool) -> list[cal.Case]:
         ctx, cfg = self.ctx, self.cfg
         candidates = candidates_of(ctx, data)
         if not candidates:
@@ -188,7 +188,7 @@ class Oracle:
         _, exposure = sc.select_with_exposure(renders, scene, candidates, exposure, ctx.weights, ctx.prior_weight,
                                               cfg.exposure_rounds, cfg.erode)
         measured = sc.candidate_terms(renders, scene, exposure, cfg.erode)
-        extra = (probe_terms(self.probe, scene, foreground, renders, exposure, cfg.erode, self.embed, self.sigma)
+        extra = (probe_terms(self.probe, scene, renders, exposure, cfg.erode, self.embed, self.sigma)
                  if self.probe else {})
         cases = []
         for index, options in sorted(candidates.items()):

@@ -105,26 +105,3 @@ def test_slots_switch_every_part_at_once_and_costs_rank_by_distance_and_prior() 
     assert [s.candidate.material_id for s in rank_candidates([a, b], {1: 1.0, 2: 0.9}, prior_weight=1.0)] == [1, 2]
     scores = scores_of(ranked)
     assert sum(scores) == pytest.approx(1.0) and scores == sorted(scores, reverse=True)
-
-
-
-def test_a_render_is_blended_with_the_photos_background_at_its_silhouette() -> None:
-    """A thin part whose edge pixels the camera blended with a grey backdrop: the render (un-premultiplied,
-    with coverage) shows the same edge once `exposed_lab` blends it with the photo's measured background."""
-    from photoshape_flow.fit.scene import FitScene
-
-    size, colour, backdrop = 32, np.array([0.30, 0.20, 0.10]), np.array([0.8, 0.8, 0.8])
-    coverage = np.zeros((size, size), np.float32)
-    coverage[4:28, 14:17] = 1.0
-    coverage[4:28, 13] = coverage[4:28, 17] = 0.5  # anti-aliased edges
-    photo_linear = coverage[..., None] * colour + (1.0 - coverage[..., None]) * backdrop
-    photo = np.round(lt.linear_to_srgb(photo_linear) * 255).astype(np.uint8)
-    labels = (coverage > 0).astype(np.int32)
-    scene = FitScene.from_photo(None, None, photo, labels, [1], erode_pixels=0, foreground=labels > 0)
-    np.testing.assert_allclose(scene.background, backdrop, atol=0.01)
-    rgba = np.concatenate([np.where(coverage[..., None] > 0, colour, 0.0), coverage[..., None]], -1)
-    blended = scene.exposed_lab(rgba.astype(np.float32), 1.0)
-    edge = coverage == 0.5
-    assert float(np.abs(blended[edge] - scene.photo_lab[edge]).max()) < 1.0  # CIELAB units
-    unblended = to_lab(lt.exposed_srgb(rgba[..., :3], 1.0))
-    assert float(np.abs(unblended[edge] - scene.photo_lab[edge]).max()) > 10.0

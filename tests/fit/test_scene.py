@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from tests.render.conftest import write_exr
 
-from photoshape_flow.fit.appearance import Weights
+from photoshape_flow.fit import lighting as lt
+from photoshape_flow.fit.appearance import Weights, to_lab
 from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.scene import (
     FitScene,
@@ -126,3 +127,23 @@ def test_lighting_estimate_recovers_the_rotation_also_after_screening(scene) -> 
     # screened: every envmap at 0 and pi, then only the best one at all four rotations
     best, _, _, renders = estimate_lighting(frame, fit_scene, truth, studios, 4, Weights(), keep=1)
     assert (best.envmap_id, best.rotation, renders) == (TRUE_ENVMAP, 0.0, 3 * 2 + 2)
+
+
+def test_a_render_is_blended_with_the_photos_background_at_its_silhouette() -> None:
+    """A thin part whose edge pixels the camera blended with a grey backdrop: the render (un-premultiplied,
+    with coverage) shows the same edge once `exposed_lab` blends it with the photo's measured background."""
+    size, colour, backdrop = 32, np.array([0.30, 0.20, 0.10]), np.array([0.8, 0.8, 0.8])
+    coverage = np.zeros((size, size), np.float32)
+    coverage[4:28, 14:17] = 1.0
+    coverage[4:28, 13] = coverage[4:28, 17] = 0.5  # anti-aliased edges
+    photo_linear = coverage[..., None] * colour + (1.0 - coverage[..., None]) * backdrop
+    photo = np.round(linear_to_srgb(photo_linear) * 255).astype(np.uint8)
+    labels = (coverage > 0).astype(np.int32)
+    scene = FitScene.from_photo(None, None, photo, labels, [1], erode_pixels=0, foreground=labels > 0)
+    np.testing.assert_allclose(scene.background, backdrop, atol=0.01)
+    rgba = np.concatenate([np.where(coverage[..., None] > 0, colour, 0.0), coverage[..., None]], -1)
+    blended = scene.exposed_lab(rgba.astype(np.float32), 1.0)
+    edge = coverage == 0.5
+    assert float(np.abs(blended[edge] - scene.photo_lab[edge]).max()) < 1.0  # CIELAB units
+    unblended = to_lab(lt.exposed_srgb(rgba[..., :3], 1.0))
+    assert float(np.abs(unblended[edge] - scene.photo_lab[edge]).max()) > 10.0
