@@ -28,7 +28,8 @@ TABLES = ("shape", "part", "exemplar", "material", "envmap", "view_feature", "pa
 
 def main() -> None:
     from tests.conftest import data_root_with_inbox
-    from tests.pipeline.test_kill_points import _die_at, _run_all, snapshot
+    from tests.pipeline.test_kill_points import _die_at
+    from tests.pipeline.whole_runs import run_all, snapshot
 
     from photoshape_flow.demo import generate_demo
     from photoshape_flow.faults import POINTS
@@ -43,7 +44,7 @@ def main() -> None:
         demo = Path(tmp) / "demo"
         generate_demo(demo, "tiny", seed=3)
         reference = data_root_with_inbox(Path(tmp) / "reference", demo)
-        assert _run_all(reference, None).returncode == 0
+        assert run_all(reference, None).returncode == 0
         want = snapshot(f"sqlite:///{reference / 'photoshape.db'}")
         for point, hit in cases:
             root = data_root_with_inbox(Path(tmp) / f"{point}-{hit}", demo)
@@ -55,7 +56,7 @@ def main() -> None:
                 print(f"{point}:{hit}: not reached")
                 shutil.rmtree(root, ignore_errors=True)
                 continue
-            final = _run_all(root, None)
+            final = run_all(root, None)
             got = snapshot(f"sqlite:///{root / 'photoshape.db'}")
             differs = [t for t in TABLES if got[t] != want[t]] + (["claims_left"] if got["claims_left"] else [])
             outcome = "identical" if final.returncode == 0 and not differs else "DIFFERENT"

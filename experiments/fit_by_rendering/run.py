@@ -26,7 +26,7 @@ VARIANTS = {
     "default": [],  # weights and temperature fitted on validation renders (D34)
     "hand-set": ["fit.calibration_cases=0"],  # the profile's weights (D32), temperature 1
     "blur0": ["fit.blur=0"],
-    "no-exposure-rounds": ["fit.exposure_rounds=0"],
+    "no-exposure-search": ["fit.exposure_stops=0"],
     "no-prior": ["fit.prior_weight=0"],
 }
 FIGURES = ("material_top1", "material_top5", "substance_accuracy")

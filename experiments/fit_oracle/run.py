@@ -8,8 +8,12 @@ materials, val shapes under val envmaps) into aligned "photos" and measures ever
 stage does. Here each nuisance between such a photo and the render of its true material can be
 switched off, one condition = four switches, comma-separated:
 
-    lighting   est: the stage's estimate over the training envmaps | true: the render's own envmap,
-               rotation and scale (exposure still solved)
+    lighting   est: the stage's estimate over the training envmaps | estx: that estimate lit by the true
+               materials rather than the ranking's first (what the library of envmaps allows) |
+               joint: the `--joint-top` best hypotheses of that search, each with every candidate
+               rendered, the one whose selection costs least | true: the render's own envmap,
+               rotation and scale (exposure still searched per candidate, `fit.scene.profiled_terms`) |
+               truex: that and the one exposure that fits the true materials' render to the photo
     photo      deg: degraded like a demo exemplar (exposure, white balance, blur, noise, JPEG) | clean
     mask       mis: the part map misaligned as fine alignment errs | exact
     uv         def: candidates at their materials' own UV scale | uv: at the render's per-part UV transform
@@ -22,6 +26,9 @@ cost, to measure a candidate term before it enters `fit.appearance`:
 
     embedding  1 - cos of the material classifier's pooled features of the photo's and the render's part
     layout     mean CIELAB difference per pixel after a blur of `--layout-sigma` (the shading's layout)
+    shift      |log2| of how far a candidate's own exposure is from the lighting's (stops)
+
+`--dump` adds each case (candidates, their substances, features, truth) to the results.
 
 Read-only. Output: `<data root>/experiments/fit_oracle/results.json`.
 """
@@ -29,6 +36,7 @@ Read-only. Output: `<data root>/experiments/fit_oracle/results.json`.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from collections.abc import Callable
 from typing import Any
@@ -137,6 +145,8 @@ class Oracle:
         self.frame = UVFrame(self.ctx.frame)
         self.ctx._frame = self.frame
         self.probe, self.sigma = probe, sigma
+        self.records: list[dict[str, Any]] = []  # each case's candidates and features (`--dump`)
+        self.joint_top = 3  # lighting hypotheses the `joint` condition renders the candidates under
         self.embed = Embedder(self.ranker.model) if probe == "embedding" else None
 
     def cases(self, row: m.Rendering, condition: str) -> list[cal.Case]:
@@ -164,31 +174,62 @@ class Oracle:
         self.frame.uv = ({p.index: UVTransform(scale=p.uv.scale, rotation=p.uv.rotation, offset=tuple(p.uv.offset))
                           for p in spec.parts} if uv == "uv" else None)
         try:
-            return self._measure(row, spec, truth, scene, data, lighting == "true")
+            return self._measure(row, spec, truth, scene, data, lighting)
         finally:
             self.frame.uv = None
 
+    def _joint_lighting(self, scene: sc.FitScene, data: PairData, candidates: dict) -> tuple[Any, float]:
+        """(envmap, exposure) of the `joint_top` best lighting hypotheses (every training envmap and rotation lit
+        by the ranking's first materials) whose profiled selection has the lowest joint cost."""
+        from photoshape_flow.fit.select import rank_candidates
+
+        ctx, cfg = self.ctx, self.cfg
+        materials = [ctx.spec(data.rank1().get(p.index)) for p in scene.mesh.parts]
+        hypotheses = [lt.Hypothesis(e, r) for e in sorted(ctx.envmaps) for r in lt.rotations(cfg.rotations)]
+        scored = sc.score_lighting(ctx.frame, scene, materials, [(h, ctx.envmap_spec(h.envmap_id, h.rotation))
+                                                                 for h in hypotheses], ctx.weights, cfg.erode)
+        best: tuple[float, Any, float] | None = None
+        for h, exposure, _ in sorted(scored, key=lambda item: item[2])[: self.joint_top]:
+            envmap = ctx.envmap_spec(h.envmap_id, h.rotation)
+            renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
+            distances, _, joint = sc.select_profiled(renders, scene, candidates, exposure, ctx.weights,
+                                                     ctx.prior_weight, cfg.exposure_stops, cfg.erode)
+            total = sum(rank_candidates(candidates[i], distances[i], ctx.prior_weight)[0].cost for i in distances)
+            if best is None or total < best[0]:
+                best = (total, envmap, joint)
+        assert best is not None
+        return best[1], best[2]
+
     def _measure(self, row: m.Rendering, spec: RenderSpec, truth: dict[int, int], scene: sc.FitScene,
-                 data: PairData, true_light: bool) -> list[cal.Case]:
+                 data: PairData, lighting: str) -> list[cal.Case]:
         ctx, cfg = self.ctx, self.cfg
         candidates = candidates_of(ctx, data)
         if not candidates:
             return []
-        if true_light:
+        if lighting in ("true", "truex"):
             envmap = EnvmapSpec(self.store.resolve(self.envmaps[spec.envmap.envmap_id]), scale=spec.envmap.scale,
                                 rotation=spec.envmap.rotation)
-            materials = [ctx.spec(data.rank1().get(p.index)) for p in scene.mesh.parts]
+            lit = truth if lighting == "truex" else data.rank1()
+            materials = [ctx.spec(lit.get(p.index)) for p in scene.mesh.parts]
             ((_, exposure, _),) = sc.score_lighting(ctx.frame, scene, materials, [(None, envmap)], ctx.weights,
                                                     cfg.erode)
-        else:
-            light = lighting_estimate(ctx, data)
+        else:  # estx: the true materials light the search (what the library of envmaps can do)
+            lit_data = data if lighting in ("est", "joint") else dataclasses.replace(data, rows={
+                i: [m.Assignment(material_id=truth[i])] for i in data.rows if i in truth})
+            light = lighting_estimate(ctx, lit_data)
             envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
             exposure = float(light["exposure"])
-        renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap, cfg.erode)
-        _, exposure = sc.select_with_exposure(renders, scene, candidates, exposure, ctx.weights, ctx.prior_weight,
-                                              cfg.exposure_rounds, cfg.erode)
-        measured = sc.candidate_terms(renders, scene, exposure, cfg.erode)
-        extra = (probe_terms(self.probe, scene, renders, exposure, cfg.erode, self.embed, self.sigma)
+        if lighting == "joint":  # the best few lighting hypotheses, each judged by its selection's joint cost
+            envmap, exposure = self._joint_lighting(scene, data, candidates)
+        renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
+        grid = (1.0,) if lighting == "truex" else sc.exposure_grid(cfg.exposure_stops)  # truex: kept as it is
+        profiled, _ = sc.profiled_terms(renders, scene, candidates, exposure, ctx.weights, ctx.prior_weight, grid,
+                                        cfg.erode)
+        measured = {i: {mid: t for mid, (t, _) in by.items()} for i, by in profiled.items()}
+        shift = {(i, mid): abs(float(np.log2(e / exposure))) for i, by in profiled.items()
+                 for mid, (_, e) in by.items()}
+        extra = (shift if self.probe == "shift" else
+                 probe_terms(self.probe, scene, renders, exposure, cfg.erode, self.embed, self.sigma)
                  if self.probe else {})
         cases = []
         for index, options in sorted(candidates.items()):
@@ -201,6 +242,10 @@ class Oracle:
             features = np.array([[*np.where(np.isnan(r := rows.get(c.material_id, fill)), fill, r), c.prior_cost]
                                  for c in options])
             cases.append(cal.Case(features, ids.index(truth[index]), group=f"{row.kind}/{row.key}"))
+            self.records.append({"group": f"{row.kind}/{row.key}", "part": index, "candidates": ids,
+                                 "substances": [ctx.material_substance.get(i, "") for i in ids],
+                                 "truth": ids.index(truth[index]), "features": features.round(5).tolist(),
+                                 "pixels": int(scene.masks[index].sum())})
         return cases
 
 
@@ -228,12 +273,15 @@ def main() -> None:
     parser.add_argument("--profile", default="small")
     parser.add_argument("--cases", type=int, default=None, help="validation renders (default: the profile's)")
     parser.add_argument("--conditions", default=";".join(DEFAULT_CONDITIONS), help="';'-separated conditions")
-    parser.add_argument("--probe", choices=("embedding", "layout"), default=None)
+    parser.add_argument("--probe", choices=("embedding", "layout", "shift"), default=None)
     parser.add_argument("--layout-sigma", type=float, default=2.0)
     parser.add_argument("--set", action="append", default=[], help="profile override, e.g. fit.blur=1.0")
+    parser.add_argument("--joint-top", type=int, default=3, help="hypotheses the `joint` lighting condition tries")
+    parser.add_argument("--dump", action="store_true", help="also write each case (candidates, features) per condition")
     args = parser.parse_args()
     settings = get_settings()
     oracle = Oracle(settings, args.profile, args.set, args.probe, args.layout_sigma)
+    oracle.joint_top = args.joint_top
     terms = (*cal.TERMS[:4], args.probe, "prior") if args.probe else cal.TERMS
     with_terms(terms, fc.hand_set)
     count = args.cases if args.cases is not None else oracle.cfg.calibration_cases
@@ -250,6 +298,9 @@ def main() -> None:
             except (ValueError, OSError) as exc:
                 print(f"{row.kind}/{row.key}: skipped ({exc})")
         results["conditions"][condition] = summary(cases, oracle.cfg, terms)
+        if args.dump:
+            results.setdefault("cases", {})[condition] = oracle.records
+        oracle.records = []
         print(condition, json.dumps(results["conditions"][condition]), flush=True)
     out = results_dir(settings, "fit_oracle")
     out.mkdir(parents=True, exist_ok=True)

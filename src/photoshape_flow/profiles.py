@@ -108,10 +108,11 @@ class FitConfig:
     spp: int = 16
     rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
     lighting_envmaps: int = 4  # more training envmaps than this: screen all at 2 azimuths, search the best 4
-    lighting_rounds: int = 1  # 2+: then select, and light the winners again (no gain measured yet)
+    lighting_rounds: int = 1  # 2+: then select, and light the winners again (worse on validation renders: D42)
     erode: int = 1  # pixels shrunk off each part mask before comparing
     blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
-    exposure_rounds: int = 3  # exposure re-solved with the winners, then re-selected (no new renders)
+    exposure_stops: float = 2.0  # each candidate judged at its best exposure this far either side of the
+    #                              lighting's, in quarter stops (no new renders; 0: the lighting's only; D42)
     color_weight: float = 1.0  # CIELAB mean
     contrast_weight: float = 0.5  # CIELAB standard deviation
     gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales

@@ -23,7 +23,7 @@ from photoshape_flow.fit.scene import (
     FrameRenderer,
     estimate_lighting,
     render_candidates,
-    select_with_exposure,
+    select_profiled,
 )
 from photoshape_flow.fit.select import rank_candidates
 from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec
@@ -103,14 +103,17 @@ def test_lighting_estimate_picks_the_photo_envmap_and_its_exposure(scene) -> Non
 
 
 def test_the_true_material_scores_best_among_other_substances_and_colours(scene) -> None:  # type: ignore[no-untyped-def]
-    """Even from a wrong exposure (the ranking's first materials lit it): re-solved with the winners."""
+    """Even from a wrong exposure (the ranking's first materials lit it): each candidate is judged at its own
+    best exposure for the whole photo, and the winners' exposure is the photo's."""
     frame, fit_scene = _fit_scene(scene)
     candidates = {i: [Candidate(mid, MATERIALS[mid][0], 1.0 / len(MATERIALS), "ranking")
                       for mid in sorted(MATERIALS, reverse=True)] for i in (1, 2)}
     renders = render_candidates(frame, fit_scene, {1: 6, 2: 6}, candidates, _spec, scene[3][TRUE_ENVMAP])
     assert len(renders.renders) == len(MATERIALS)  # both parts switch candidate in the same render
-    measured, exposure = select_with_exposure(renders, fit_scene, candidates, 2.5 * EXPOSURE, Weights(), 0.3)
+    measured, exposures, exposure = select_profiled(renders, fit_scene, candidates, 2.5 * EXPOSURE, Weights(), 0.3,
+                                                    stops=2.0)
     assert exposure == pytest.approx(EXPOSURE, rel=0.15)
+    assert {exposures[i][mid] for i, mid in TRUTH.items()} == {exposure}
     for index, material in TRUTH.items():
         ranked = rank_candidates(candidates[index], measured[index], prior_weight=0.3)
         assert ranked[0].candidate.material_id == material, (index, [(s.candidate.material_id, s.cost)

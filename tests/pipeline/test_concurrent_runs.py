@@ -6,18 +6,20 @@ from __future__ import annotations
 
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import pytest
 import sqlalchemy as sa
 from tests.conftest import data_root_with_inbox
-from tests.pipeline.test_kill_points import PHOTOSHAPE, _env
+from tests.pipeline.whole_runs import PHOTOSHAPE, run_env, snapshot
 
 pytestmark = [pytest.mark.slow, pytest.mark.render, pytest.mark.postgres]
 
 
-def test_three_concurrent_runs_do_each_item_once(tiny_demo: Path, tmp_path: Path, pg_url: str) -> None:
+def test_three_concurrent_runs_do_each_item_once(tiny_demo: Path, tmp_path: Path, pg_url: str,
+                                                 reference: tuple[Path, dict[str, Any]]) -> None:
     root = data_root_with_inbox(tmp_path / "data", tiny_demo)
-    env = _env(root, pg_url)
+    env = run_env(root, pg_url)
     subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=env, check=True, capture_output=True)
     runs = [subprocess.Popen([PHOTOSHAPE, "run", "all", "--profile", "tiny", "--wait"], env=env,
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for _ in range(3)]
@@ -41,3 +43,7 @@ def test_three_concurrent_runs_do_each_item_once(tiny_demo: Path, tmp_path: Path
     assert held == 0 and assignments == 0
     assert rewritten == [], rewritten[:10]  # every rendering written once
     assert renders.get("bootstrap") and renders.get("training") and renders.get("photoshape")
+    want, got = reference[1], snapshot(pg_url)  # an uninterrupted SQLite run's rows (tests/pipeline/conftest.py)
+    for table in ("shape", "part", "exemplar", "material", "envmap", "view_feature", "pair", "alignment",
+                  "part_substance", "rendering", "classifier", "assignment"):
+        assert got[table] == want[table], f"{table} differs from an uninterrupted run's"

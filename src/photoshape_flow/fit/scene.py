@@ -227,34 +227,28 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
 
 @dataclass
 class CandidateRenders:
-    """The slot renders of one pair: which render shows each (part, candidate), and its rendered region's mean."""
+    """The slot renders of one pair: which render shows each (part, candidate)."""
 
     renders: list[np.ndarray]  # (size, size, 4) un-premultiplied linear RGB and coverage (`FitScene.render`)
     where: dict[int, dict[int, int]]  # part index -> candidate material -> index into `renders`
-    means: dict[int, dict[int, tuple[np.ndarray, int]]]  # part index -> candidate -> (mean linear RGB, pixels)
     ids: np.ndarray  # the frame's part indices
 
 
 def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, int | None],
                       candidates: Mapping[int, Sequence[Candidate]], spec_of: Callable[[int | None], Any],
-                      envmap: Any, erode_pixels: int = 1) -> CandidateRenders:
+                      envmap: Any) -> CandidateRenders:
     """One render per candidate slot (`render_slots`) under `envmap`.
 
     `base`: the material of every mesh part that is not switched (part index -> material id, None or
     absent: built-in); `spec_of` turns a material id into a render spec.
     """
-    ids = frame.part_ids(scene.mesh, scene.camera)
-    regions = {i: erode(ids == i, erode_pixels) for i in candidates}
-    out = CandidateRenders([], {i: {} for i in candidates}, {i: {} for i in candidates}, ids)
+    out = CandidateRenders([], {i: {} for i in candidates}, frame.part_ids(scene.mesh, scene.camera))
     for slot in render_slots(candidates):
         rgba = scene.render(frame, [spec_of(slot.get(p.index, base.get(p.index))) for p in scene.mesh.parts], envmap)
         out.renders.append(rgba)
         for index, material in slot.items():
             if material not in out.where[index]:
                 out.where[index][material] = len(out.renders) - 1
-                if regions[index].any():
-                    out.means[index][material] = (rgba[..., :3][regions[index]].mean(axis=0),
-                                                  int(regions[index].sum()))
     return out
 
 
@@ -273,34 +267,63 @@ def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float,
     return out
 
 
-def candidate_distances(renders: CandidateRenders, scene: FitScene, exposure: float, weights: Weights,
-                        erode_pixels: int = 1) -> dict[int, dict[int, float | None]]:
-    """Part index -> {candidate material: distance to the photo} with the renders at `exposure`."""
-    return {i: {mid: None if t is None else weigh(t, weights) for mid, t in by.items()}
-            for i, by in candidate_terms(renders, scene, exposure, erode_pixels).items()}
+def weighed(measured: Mapping[int, Mapping[int, np.ndarray | None]],
+            weights: Weights) -> dict[int, dict[int, float | None]]:
+    """Part index -> {candidate material: distance}: `candidate_terms` under `weights`."""
+    return {i: {mid: None if t is None else weigh(t, weights) for mid, t in by.items()} for i, by in measured.items()}
 
 
-def select_with_exposure(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
-                         exposure: float, weights: Weights, prior_weight: float, rounds: int = 3,
-                         erode_pixels: int = 1) -> tuple[dict[int, dict[int, float | None]], float]:
-    """(distances, exposure): the winners and the exposure solved in turn, without new renders.
+EXPOSURE_STEP = 0.25  # stops between the exposures `select_profiled` tries
 
-    The exposure estimated with the ranking's first materials is biased when they are wrong (a dark
-    wrong material asks for a bright exposure); after each selection the exposure is solved again in
-    closed form with the winners' rendered means, up to `rounds` times or until it settles (1%).
+
+def exposure_grid(stops: float) -> tuple[float, ...]:
+    """Factors of an exposure `stops` either side of it in `EXPOSURE_STEP`s (just 1.0 for 0 stops)."""
+    n = int(round(max(0.0, stops) / EXPOSURE_STEP))
+    return tuple(float(2.0 ** (k * EXPOSURE_STEP)) for k in range(-n, n + 1))
+
+
+def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
+                   exposure: float, weights: Weights, prior_weight: float, grid: Sequence[float] = (1.0,),
+                   erode_pixels: int = 1) -> tuple[dict[int, dict[int, tuple[np.ndarray | None, float]]], float]:
+    """(part -> {candidate: (its distance terms, the exposure they are measured at)}, the winners' exposure).
+
+    A material's albedo and the photo's exposure trade off (a dark material brightly exposed looks
+    like a light one). So each candidate is measured at the exposure (a factor of `exposure` on
+    `grid`) that best explains the whole photo if its part takes that candidate: its own cost plus
+    every other part's cheapest candidate at that exposure. A light material is then not judged at
+    the exposure a dark wrong winner asked for; with a single observed part every candidate gets
+    its own exposure (lightness and exposure cannot be told apart there). The winners' exposure is
+    the grid point where the sum of every part's cheapest cost is lowest. No new renders: each
+    grid point re-exposes the same candidate renders (docs/decisions.md D42).
     """
     from photoshape_flow.fit.select import rank_candidates
 
-    photo_means = lt.region_means(scene.photo_linear, scene.masks)
-    while True:
-        measured = candidate_distances(renders, scene, exposure, weights, erode_pixels)
-        if rounds <= 0:
-            return measured, exposure
-        rounds -= 1
-        winners = {i: rank_candidates(candidates[i], measured[i], prior_weight)[0].candidate.material_id
-                   for i in candidates if candidates[i]}
-        means = {i: renders.means[i][w] for i, w in winners.items() if w in renders.means[i]}
-        update = lt.exposure(means, photo_means) if means else exposure
-        if abs(math.log(update / exposure)) < 0.01:
-            return measured, exposure
-        exposure = update
+    trials = [exposure * float(f) for f in grid]
+    measured = [candidate_terms(renders, scene, e, erode_pixels) for e in trials]
+    parts = [i for i in candidates if candidates[i]]
+    costs: list[dict[int, dict[int, float]]] = []
+    for terms_at in measured:
+        dists = weighed(terms_at, weights)
+        costs.append({i: {s.candidate.material_id: s.cost
+                              for s in rank_candidates(candidates[i], dists[i], prior_weight)} for i in parts})
+    best = [{i: min(c[i].values()) for i in parts} for c in costs]
+    total = [sum(b.values()) for b in best]
+    out: dict[int, dict[int, tuple[np.ndarray | None, float]]] = {}
+    for i in parts:
+        out[i] = {}
+        for cand in candidates[i]:
+            k = min(range(len(trials)), key=lambda k: costs[k][i][cand.material_id] + total[k] - best[k][i])
+            out[i][cand.material_id] = (measured[k][i].get(cand.material_id), trials[k])
+    return out, trials[min(range(len(trials)), key=lambda k: total[k])]
+
+
+def select_profiled(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
+                    exposure: float, weights: Weights, prior_weight: float, stops: float,
+                    erode_pixels: int = 1) -> tuple[dict[int, dict[int, float | None]], dict[int, dict[int, float]],
+                                                    float]:
+    """(distances, each candidate's exposure, the winners' exposure) of `profiled_terms`, searched `stops`
+    either side of the lighting's `exposure`."""
+    profiled, joint = profiled_terms(renders, scene, candidates, exposure, weights, prior_weight,
+                                     exposure_grid(stops), erode_pixels)
+    distances = weighed({i: {mid: t for mid, (t, _) in by.items()} for i, by in profiled.items()}, weights)
+    return distances, {i: {mid: e for mid, (_, e) in by.items()} for i, by in profiled.items()}, joint

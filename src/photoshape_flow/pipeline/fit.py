@@ -11,7 +11,8 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    of every substance, every enabled material the classifier was not trained on.
 3. Renders (`fit.select.render_slots`): render j puts each part's j-th candidate on it, at the pair's
    camera in the exemplar's frame; each part's render region is compared with the photo's aligned
-   region (`fit.appearance.distance`), and the cost adds the ranking prior. The weights, the
+   region (`fit.appearance.distance`) at the exposure that best explains the whole photo with that
+   candidate (`fit.scene.select_profiled`), and the cost adds the ranking prior. The weights, the
    scores' temperature and the blur are fitted per classifier on validation renders
    (`pipeline.fit_calibration`, D34) before the first pair; the profile's hand-set ones are the fallback.
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
@@ -50,7 +51,7 @@ from photoshape_flow.fit.scene import (
     FrameRenderer,
     estimate_lighting,
     render_candidates,
-    select_with_exposure,
+    select_profiled,
 )
 from photoshape_flow.fit.select import rank_candidates, scores_of
 from photoshape_flow.hashing import stable_hash
@@ -64,8 +65,9 @@ from photoshape_flow.vocab import STATUS_OK
 log = logging.getLogger(__name__)
 
 METHOD = "fit"
-CODE_VERSION = "fit-4"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
-#                         fit-4: renders blended with the photo's background at the silhouette (D41)
+CODE_VERSION = "fit-5"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
+#                         fit-4: renders blended with the photo's background at the silhouette (D41);
+#                         fit-5: each candidate judged at its own best exposure (D42)
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
 
 
@@ -352,15 +354,17 @@ def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candid
 
 def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
                      light: dict[str, Any], envmap: Any = None) -> tuple[dict[int, dict[int, float | None]], float]:
-    """(part index -> {candidate material: distance}, exposure) under the exemplar's lighting (`fit.scene`);
+    """(part index -> {candidate material: distance}, the winners' exposure) under the exemplar's lighting
+    (`fit.scene.select_profiled`: each candidate at the exposure that best explains the photo with it);
     `envmap` replaces the lighting's training envmap (the attribution experiment lights with the truth's)."""
     if not candidates:
         return {}, float(light.get("exposure", 1.0))
     if envmap is None:
         envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
-    renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
-    return select_with_exposure(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
-                                ctx.weights, ctx.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
+    renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap)
+    distances, _, exposure = select_profiled(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
+                                             ctx.weights, ctx.prior_weight, ctx.cfg.exposure_stops, ctx.cfg.erode)
+    return distances, exposure
 
 
 def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],

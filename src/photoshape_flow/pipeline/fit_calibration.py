@@ -13,7 +13,7 @@ under val envmaps, true material of every part known from its spec) becomes a ca
    as `pipeline.calibration.posterior_reliability` does): the prior of the candidates;
 3. lit, given candidates, rendered and measured by the stage's own functions (`pipeline.fit`:
    `lighting_estimate` over the training envmaps, not the render's own, `candidates_of`,
-   `render_candidates`, `select_with_exposure`) with the profile's hand-set weights, at the render's
+   `render_candidates`, `profiled_terms`) with the profile's hand-set weights, at the render's
    camera; each observed part whose true material is among its candidates is one `fit.calibrate.Case`.
 
 Each blur of `fit.calibration_blurs` measures the same renders (rendered once, `CachedFrame`); the
@@ -44,7 +44,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import calibrate as cal
-from photoshape_flow.fit.scene import FitScene, FrameRenderer, candidate_terms, render_candidates, select_with_exposure
+from photoshape_flow.fit.scene import FitScene, FrameRenderer, exposure_grid, profiled_terms, render_candidates
 from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.progress_sink import Progress, counted
@@ -181,10 +181,10 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering,
     if not candidates:
         return [], counts
     envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
-    renders = render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap, ctx.cfg.erode)
-    _, exposure = select_with_exposure(renders, scene, candidates, float(light["exposure"]), ctx.weights,
-                                       ctx.prior_weight, ctx.cfg.exposure_rounds, ctx.cfg.erode)
-    measured = candidate_terms(renders, scene, exposure, ctx.cfg.erode)
+    renders = render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
+    profiled, _ = profiled_terms(renders, scene, candidates, float(light["exposure"]), ctx.weights, ctx.prior_weight,
+                                 exposure_grid(ctx.cfg.exposure_stops), ctx.cfg.erode)
+    measured = {i: {mid: t for mid, (t, _) in by.items()} for i, by in profiled.items()}
     cases = []
     for index, options in sorted(candidates.items()):
         ids_ = [c.material_id for c in options]
