@@ -88,7 +88,9 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     from tests.flows.test_pipeline_flow import recoloured_materials
 
     data_root = data_root_with_inbox(tmp_path / "data", tiny_demo)
-    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1"}
+    # a crash of the flow's process (one SIGSEGV seen in CI, 2026-11-25) leaves its Python stack in serve.log
+    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1",
+           "PYTHONFAULTHANDLER": "1"}
     env.pop("PHOTOSHAPE_DATABASE_URL", None)
     subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=env, check=True, capture_output=True)
     built = subprocess.run([PHOTOSHAPE, "run", "all", "--profile", "tiny", "--set", "publish.method=fit"], env=env,
