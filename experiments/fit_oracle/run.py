@@ -213,21 +213,19 @@ class Oracle:
             materials = [ctx.spec(lit.get(p.index)) for p in scene.mesh.parts]
             ((_, exposure, _),) = sc.score_lighting(ctx.frame, scene, materials, [(None, envmap)], ctx.weights,
                                                     cfg.erode)
+        elif lighting == "joint":  # the best few lighting hypotheses, each judged by its selection's joint cost
+            envmap, exposure = self._joint_lighting(scene, data, candidates)
         else:  # estx: the true materials light the search (what the library of envmaps can do)
-            lit_data = data if lighting in ("est", "joint") else dataclasses.replace(data, rows={
+            lit_data = data if lighting == "est" else dataclasses.replace(data, rows={
                 i: [m.Assignment(material_id=truth[i])] for i in data.rows if i in truth})
             light = lighting_estimate(ctx, lit_data)
             envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
             exposure = float(light["exposure"])
-        if lighting == "joint":  # the best few lighting hypotheses, each judged by its selection's joint cost
-            envmap, exposure = self._joint_lighting(scene, data, candidates)
         renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
         grid = (1.0,) if lighting == "truex" else sc.exposure_grid(cfg.exposure_stops)  # truex: kept as it is
-        profiled, _ = sc.profiled_terms(renders, scene, candidates, exposure, ctx.weights, ctx.prior_weight, grid,
-                                        cfg.erode)
-        measured = {i: {mid: t for mid, (t, _) in by.items()} for i, by in profiled.items()}
-        shift = {(i, mid): abs(float(np.log2(e / exposure))) for i, by in profiled.items()
-                 for mid, (_, e) in by.items()}
+        measured, exposures, _ = sc.profiled_terms(renders, scene, candidates, exposure, ctx.weights,
+                                                   ctx.prior_weight, grid, cfg.erode)
+        shift = {(i, mid): abs(float(np.log2(e / exposure))) for i, by in exposures.items() for mid, e in by.items()}
         extra = (shift if self.probe == "shift" else
                  probe_terms(self.probe, scene, renders, exposure, cfg.erode, self.embed, self.sigma)
                  if self.probe else {})

@@ -284,8 +284,10 @@ def exposure_grid(stops: float) -> tuple[float, ...]:
 
 def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
                    exposure: float, weights: Weights, prior_weight: float, grid: Sequence[float] = (1.0,),
-                   erode_pixels: int = 1) -> tuple[dict[int, dict[int, tuple[np.ndarray | None, float]]], float]:
-    """(part -> {candidate: (its distance terms, the exposure they are measured at)}, the winners' exposure).
+                   erode_pixels: int = 1) -> tuple[dict[int, dict[int, np.ndarray | None]], dict[int, dict[int, float]],
+                                                   float]:
+    """(part -> {candidate: its distance terms}, part -> {candidate: the exposure they are measured at},
+    the winners' exposure).
 
     A material's albedo and the photo's exposure trade off (a dark material brightly exposed looks
     like a light one). So each candidate is measured at the exposure (a factor of `exposure` on
@@ -308,13 +310,11 @@ def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mappi
                               for s in rank_candidates(candidates[i], dists[i], prior_weight)} for i in parts})
     best = [{i: min(c[i].values()) for i in parts} for c in costs]
     total = [sum(b.values()) for b in best]
-    out: dict[int, dict[int, tuple[np.ndarray | None, float]]] = {}
-    for i in parts:
-        out[i] = {}
-        for cand in candidates[i]:
-            k = min(range(len(trials)), key=lambda k: costs[k][i][cand.material_id] + total[k] - best[k][i])
-            out[i][cand.material_id] = (measured[k][i].get(cand.material_id), trials[k])
-    return out, trials[min(range(len(trials)), key=lambda k: total[k])]
+    chosen = {i: {c.material_id: min(range(len(trials)), key=lambda k: costs[k][i][c.material_id] + total[k]
+                                     - best[k][i]) for c in candidates[i]} for i in parts}
+    terms = {i: {mid: measured[k][i].get(mid) for mid, k in by.items()} for i, by in chosen.items()}
+    exposures = {i: {mid: trials[k] for mid, k in by.items()} for i, by in chosen.items()}
+    return terms, exposures, trials[min(range(len(trials)), key=lambda k: total[k])]
 
 
 def select_profiled(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
@@ -323,7 +323,6 @@ def select_profiled(renders: CandidateRenders, scene: FitScene, candidates: Mapp
                                                     float]:
     """(distances, each candidate's exposure, the winners' exposure) of `profiled_terms`, searched `stops`
     either side of the lighting's `exposure`."""
-    profiled, joint = profiled_terms(renders, scene, candidates, exposure, weights, prior_weight,
-                                     exposure_grid(stops), erode_pixels)
-    distances = weighed({i: {mid: t for mid, (t, _) in by.items()} for i, by in profiled.items()}, weights)
-    return distances, {i: {mid: e for mid, (_, e) in by.items()} for i, by in profiled.items()}, joint
+    terms, exposures, joint = profiled_terms(renders, scene, candidates, exposure, weights, prior_weight,
+                                             exposure_grid(stops), erode_pixels)
+    return weighed(terms, weights), exposures, joint

@@ -182,9 +182,8 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering,
         return [], counts
     envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
     renders = render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
-    profiled, _ = profiled_terms(renders, scene, candidates, float(light["exposure"]), ctx.weights, ctx.prior_weight,
-                                 exposure_grid(ctx.cfg.exposure_stops), ctx.cfg.erode)
-    measured = {i: {mid: t for mid, (t, _) in by.items()} for i, by in profiled.items()}
+    measured, _, _ = profiled_terms(renders, scene, candidates, float(light["exposure"]), ctx.weights,
+                                    ctx.prior_weight, exposure_grid(ctx.cfg.exposure_stops), ctx.cfg.erode)
     cases = []
     for index, options in sorted(candidates.items()):
         ids_ = [c.material_id for c in options]
