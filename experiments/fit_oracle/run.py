@@ -14,7 +14,8 @@ switched off, one condition = four switches, comma-separated:
                rendered, the one whose selection costs least | true: the render's own envmap,
                rotation and scale (exposure still searched per candidate, `fit.scene.profiled_terms`) |
                truex: that and the one exposure that fits the true materials' render to the photo
-    photo      deg: degraded like a demo exemplar (exposure, white balance, blur, noise, JPEG) | clean
+    photo      deg: degraded like a demo exemplar (exposure, white balance, blur, noise, JPEG) | clean |
+               deg:a+b: only those parts of that degradation (exposure, wb, background, blur, noise, jpeg)
     mask       mis: the part map misaligned as fine alignment errs | exact
     uv         def: candidates at their materials' own UV scale | uv: at the render's per-part UV transform
 
@@ -124,6 +125,32 @@ def probe_terms(probe: str, scene: sc.FitScene, renders: sc.CandidateRenders,
     return out
 
 
+#: the degradation's parameters that each `deg:` name keeps, and their values when it is left out
+DEGRADATION_PARTS = {"exposure": ("exposure",), "wb": ("white_balance",), "background": ("background",),
+                     "blur": ("blur_sigma",), "noise": ("noise_sigma",), "jpeg": ("jpeg_quality",)}
+NEUTRAL = {"exposure": 1.0, "white_balance": [1.0, 1.0, 1.0], "background": 1.0, "blur_sigma": 0.0, "noise_sigma": 0.0}
+
+
+def partly_degraded(hdr: np.ndarray, ids: np.ndarray, seed: int, keep: set[str]) -> np.ndarray:
+    """`fit_calibration.as_photo` with only the `keep` parts of its degradation (the same draws)."""
+    import cv2
+
+    from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
+
+    unknown = keep - set(DEGRADATION_PARTS)
+    if unknown:
+        raise SystemExit(f"deg: unknown part {sorted(unknown)[0]!r}; choose from {', '.join(DEGRADATION_PARTS)}")
+    params = sample_degradation(np.random.default_rng(seed))
+    kept = {k for part in keep for k in DEGRADATION_PARTS[part]}
+    params = {k: (v if k in kept or k not in NEUTRAL else NEUTRAL[k]) for k, v in params.items()}
+    covered = (np.asarray(ids) > 0).astype(np.float32)
+    image = degrade(np.asarray(hdr, np.float32)[..., :3] * covered[..., None], covered, params)
+    if "jpeg_quality" not in kept:
+        return image
+    decoded = cv2.imdecode(np.frombuffer(encode_jpeg(image, params["jpeg_quality"]), np.uint8), cv2.IMREAD_COLOR)
+    return np.ascontiguousarray(decoded[..., ::-1])
+
+
 def clean_photo(hdr: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """The validation render as 8-bit sRGB on white, without the exemplar degradation."""
     covered = (ids > 0)[..., None]
@@ -157,7 +184,10 @@ class Oracle:
         ids = ids[..., 0] if ids.ndim == 3 else ids
         rng = np.random.default_rng(item_seed(self.settings.seed, "fit-calibration", row.kind, row.key))
         seed = int(rng.integers(2**31 - 1))
-        photo = fc.as_photo(hdr, ids, seed) if photo_kind == "deg" else clean_photo(hdr, ids)
+        if photo_kind.startswith("deg:"):
+            photo = partly_degraded(hdr, ids, seed, set(photo_kind[4:].split("+")))
+        else:
+            photo = fc.as_photo(hdr, ids, seed) if photo_kind == "deg" else clean_photo(hdr, ids)
         rgb, labels, foreground = frame(photo, ids, self.cfg.size)
         error = sample_misalignment(rng, self.cfg.size)
         labels = misalign(labels, error) if mask == "mis" else labels
