@@ -29,7 +29,8 @@ cost, to measure a candidate term before it enters `fit.appearance`:
     layout     mean CIELAB difference per pixel after a blur of `--layout-sigma` (the shading's layout)
     shift      |log2| of how far a candidate's own exposure is from the lighting's (stops)
 
-`--dump` adds each case (candidates, their substances, features, truth) to the results.
+`--wb-step S` profiles a white balance with the exposure (red and blue gains 1 - S, 1, 1 + S at each
+exposure of the grid). `--dump` adds each case (candidates, their substances, features, truth) to the results.
 
 Read-only. Output: `<data root>/experiments/fit_oracle/results.json`.
 """
@@ -151,6 +152,13 @@ def partly_degraded(hdr: np.ndarray, ids: np.ndarray, seed: int, keep: set[str])
     return np.ascontiguousarray(decoded[..., ::-1])
 
 
+def white_balances(step: float) -> list[np.ndarray]:
+    """Per-channel gains of unit luminance: red and blue each at 1 - step, 1, 1 + step."""
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    gains = [np.array([1.0 + a, 1.0, 1.0 + b]) for a in (-step, 0.0, step) for b in (-step, 0.0, step)]
+    return [g / float(g @ luminance) for g in gains]
+
+
 def clean_photo(hdr: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """The validation render as 8-bit sRGB on white, without the exemplar degradation."""
     covered = (ids > 0)[..., None]
@@ -173,6 +181,7 @@ class Oracle:
         self.ctx._frame = self.frame
         self.probe, self.sigma = probe, sigma
         self.records: list[dict[str, Any]] = []  # each case's candidates and features (`--dump`)
+        self.wb_step = 0.0  # > 0: the exposure profile also searches a white balance (`--wb-step`)
         self.joint_top = 3  # lighting hypotheses the `joint` condition renders the candidates under
         self.embed = Embedder(self.ranker.model) if probe == "embedding" else None
 
@@ -253,9 +262,12 @@ class Oracle:
             exposure = float(light["exposure"])
         renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
         grid = (1.0,) if lighting == "truex" else sc.exposure_grid(cfg.exposure_stops)  # truex: kept as it is
+        if self.wb_step:  # every exposure also at each white balance of a 3 x 3 grid (red and blue gains)
+            grid = [f * gains for f in grid for gains in white_balances(self.wb_step)]
         measured, exposures, _ = sc.profiled_terms(renders, scene, candidates, exposure, ctx.weights,
                                                    ctx.prior_weight, grid, cfg.erode)
-        shift = {(i, mid): abs(float(np.log2(e / exposure))) for i, by in exposures.items() for mid, e in by.items()}
+        shift = {(i, mid): abs(float(np.log2(np.mean(e) / exposure))) for i, by in exposures.items()
+                 for mid, e in by.items()} if self.probe == "shift" else {}
         extra = (shift if self.probe == "shift" else
                  probe_terms(self.probe, scene, renders, exposure, cfg.erode, self.embed, self.sigma)
                  if self.probe else {})
@@ -305,11 +317,14 @@ def main() -> None:
     parser.add_argument("--layout-sigma", type=float, default=2.0)
     parser.add_argument("--set", action="append", default=[], help="profile override, e.g. fit.blur=1.0")
     parser.add_argument("--joint-top", type=int, default=3, help="hypotheses the `joint` lighting condition tries")
+    parser.add_argument("--wb-step", type=float, default=0.0,
+                        help="also profile a white balance: red and blue gains +-this (3 x 3 grid per exposure)")
     parser.add_argument("--dump", action="store_true", help="also write each case (candidates, features) per condition")
     args = parser.parse_args()
     settings = get_settings()
     oracle = Oracle(settings, args.profile, args.set, args.probe, args.layout_sigma)
     oracle.joint_top = args.joint_top
+    oracle.wb_step = args.wb_step
     terms = (*cal.TERMS[:4], args.probe, "prior") if args.probe else cal.TERMS
     with_terms(terms, fc.hand_set)
     count = args.cases if args.cases is not None else oracle.cfg.calibration_cases

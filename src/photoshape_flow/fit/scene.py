@@ -135,7 +135,7 @@ class FitScene:
         """A render of the scene's shape in the frame: (size, size, 4) un-premultiplied linear RGB and coverage."""
         return frame.render_rgba(self.mesh, materials, self.camera, envmap)
 
-    def exposed_lab(self, rgba: np.ndarray, exposure: float) -> np.ndarray:
+    def exposed_lab(self, rgba: np.ndarray, exposure: float | np.ndarray) -> np.ndarray:
         """CIELAB of a render (`render`) as the photo would show it: at `exposure`, over the photo's
         background at the silhouette, softened like the photo.
 
@@ -144,7 +144,8 @@ class FitScene:
         thin part (a leg, a frame bar) would be compared in two different mixtures.
         """
         alpha = rgba[..., 3:4]
-        linear = rgba[..., :3] * (alpha * float(exposure)) + (1.0 - alpha) * self.background
+        gain = np.asarray(exposure, np.float32)  # a factor, or per-channel factors (a white balance)
+        linear = rgba[..., :3] * (alpha * gain) + (1.0 - alpha) * self.background
         return to_lab(lt.exposed_srgb(soften(linear, self.blur), 1.0))
 
     @cached_property
@@ -283,7 +284,8 @@ def exposure_grid(stops: float) -> tuple[float, ...]:
 
 
 def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mapping[int, Sequence[Candidate]],
-                   exposure: float, weights: Weights, prior_weight: float, grid: Sequence[float] = (1.0,),
+                   exposure: float, weights: Weights, prior_weight: float,
+                   grid: Sequence[float | np.ndarray] = (1.0,),
                    erode_pixels: int = 1) -> tuple[dict[int, dict[int, np.ndarray | None]], dict[int, dict[int, float]],
                                                    float]:
     """(part -> {candidate: its distance terms}, part -> {candidate: the exposure they are measured at},
@@ -296,11 +298,13 @@ def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mappi
     the exposure a dark wrong winner asked for; with a single observed part every candidate gets
     its own exposure (lightness and exposure cannot be told apart there). The winners' exposure is
     the grid point where the sum of every part's cheapest cost is lowest. No new renders: each
-    grid point re-exposes the same candidate renders (docs/decisions.md D42).
+    grid point re-exposes the same candidate renders (docs/decisions.md D42). A grid point may be
+    per-channel factors (an exposure and a white balance; measured in experiments/fit_oracle and not
+    used by the stage, D43), and its exposures are then those factors.
     """
     from photoshape_flow.fit.select import rank_candidates
 
-    trials = [exposure * float(f) for f in grid]
+    trials = [exposure * (float(f) if np.ndim(f) == 0 else np.asarray(f, np.float64)) for f in grid]
     measured = [candidate_terms(renders, scene, e, erode_pixels) for e in trials]
     parts = [i for i in candidates if candidates[i]]
     costs: list[dict[int, dict[int, float]]] = []
