@@ -29,8 +29,10 @@ cost, to measure a candidate term before it enters `fit.appearance`:
     layout     mean CIELAB difference per pixel after a blur of `--layout-sigma` (the shading's layout)
     shift      |log2| of how far a candidate's own exposure is from the lighting's (stops)
 
-`--wb-step S` profiles a white balance with the exposure (red and blue gains 1 - S, 1, 1 + S at each
-exposure of the grid). `--dump` adds each case (candidates, their substances, features, truth) to the results.
+`--photo-size N` degrades each photo at N pixels (the render resampled; exemplars are degraded at
+their own size, then framed) instead of at the render's size. `--wb-step S` profiles a white balance
+with the exposure (red and blue gains 1 - S, 1, 1 + S at each exposure of the grid). `--dump` adds
+each case (candidates, their substances, features, truth) to the results.
 
 Read-only. Output: `<data root>/experiments/fit_oracle/results.json`.
 """
@@ -152,6 +154,17 @@ def partly_degraded(hdr: np.ndarray, ids: np.ndarray, seed: int, keep: set[str])
     return np.ascontiguousarray(decoded[..., ::-1])
 
 
+def upscaled(hdr: np.ndarray, ids: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The render and its part ids resampled to `size` pixels on their longer side (linear, nearest)."""
+    import cv2
+
+    scale = size / max(ids.shape)
+    height, width = round(ids.shape[0] * scale), round(ids.shape[1] * scale)
+    rows = np.minimum((np.arange(height) / scale).astype(int), ids.shape[0] - 1)
+    cols = np.minimum((np.arange(width) / scale).astype(int), ids.shape[1] - 1)
+    return cv2.resize(np.asarray(hdr, np.float32), (width, height), interpolation=cv2.INTER_LINEAR), ids[rows][:, cols]
+
+
 def white_balances(step: float) -> list[np.ndarray]:
     """Per-channel gains of unit luminance: red and blue each at 1 - step, 1, 1 + step."""
     luminance = np.array([0.2126, 0.7152, 0.0722])
@@ -181,6 +194,7 @@ class Oracle:
         self.ctx._frame = self.frame
         self.probe, self.sigma = probe, sigma
         self.records: list[dict[str, Any]] = []  # each case's candidates and features (`--dump`)
+        self.photo_size = 0  # > 0: photos degraded at this size, not the render's (`--photo-size`)
         self.wb_step = 0.0  # > 0: the exposure profile also searches a white balance (`--wb-step`)
         self.joint_top = 3  # lighting hypotheses the `joint` condition renders the candidates under
         self.embed = Embedder(self.ranker.model) if probe == "embedding" else None
@@ -191,6 +205,8 @@ class Oracle:
         truth = spec.material_by_index()
         hdr, ids = self.store.load_image(row.blobs["hdr"]), self.store.load_image(row.blobs["part_ids"])
         ids = ids[..., 0] if ids.ndim == 3 else ids
+        if self.photo_size:  # degrade at an exemplar's resolution, as exemplars are, then frame like them
+            hdr, ids = upscaled(hdr, ids, self.photo_size)
         rng = np.random.default_rng(item_seed(self.settings.seed, "fit-calibration", row.kind, row.key))
         seed = int(rng.integers(2**31 - 1))
         if photo_kind.startswith("deg:"):
@@ -317,6 +333,8 @@ def main() -> None:
     parser.add_argument("--layout-sigma", type=float, default=2.0)
     parser.add_argument("--set", action="append", default=[], help="profile override, e.g. fit.blur=1.0")
     parser.add_argument("--joint-top", type=int, default=3, help="hypotheses the `joint` lighting condition tries")
+    parser.add_argument("--photo-size", type=int, default=0,
+                        help="degrade the photo at this size (an exemplar's, e.g. 320) instead of the render's")
     parser.add_argument("--wb-step", type=float, default=0.0,
                         help="also profile a white balance: red and blue gains +-this (3 x 3 grid per exposure)")
     parser.add_argument("--dump", action="store_true", help="also write each case (candidates, features) per condition")
@@ -325,6 +343,7 @@ def main() -> None:
     oracle = Oracle(settings, args.profile, args.set, args.probe, args.layout_sigma)
     oracle.joint_top = args.joint_top
     oracle.wb_step = args.wb_step
+    oracle.photo_size = args.photo_size
     terms = (*cal.TERMS[:4], args.probe, "prior") if args.probe else cal.TERMS
     with_terms(terms, fc.hand_set)
     count = args.cases if args.cases is not None else oracle.cfg.calibration_cases
