@@ -14,7 +14,15 @@ import pytest
 from tests.fit.test_scene import _studio
 from tests.render.conftest import write_png
 
-from photoshape_flow.fit.refine import RefineSettings, choose_uv, orientation, refine_parts, region_loss, uv_search
+from photoshape_flow.fit.refine import (
+    RefineSettings,
+    RegionLoss,
+    choose_uv,
+    orientation,
+    refine_parts,
+    region_loss,
+    uv_search,
+)
 from photoshape_flow.render import Camera, MaterialSpec, Refinement
 from photoshape_flow.render.specs import linear_to_srgb
 from photoshape_flow.render.testing import box_part, normalise_to_unit_cube
@@ -34,6 +42,26 @@ def test_region_loss_is_zero_at_the_target_and_grows_with_the_colour_error() -> 
     near = region_loss(1.1 * target[0] / EXPOSURE, target[1] / EXPOSURE, target, EXPOSURE, 0.5)
     far = region_loss(1.5 * target[0] / EXPOSURE, target[1] / EXPOSURE, target, EXPOSURE, 0.5)
     assert 0 < near < far
+
+
+def test_the_differentiable_region_loss_equals_region_statistics_in_numpy() -> None:
+    from photoshape_flow.render.runtime import ensure_mitsuba
+
+    mi = ensure_mitsuba()
+    rng = np.random.default_rng(0)
+    labels = rng.integers(-1, 4, (37, 37))  # uneven parts, a size that is no multiple of a SIMD width
+    image = rng.uniform(0.0, 1.0, (37, 37, 4)).astype(np.float32)
+    parts = [5, 6, 7, 8]
+    targets = {i: (rng.uniform(0.1, 0.9, 3), rng.uniform(0.01, 0.2, 3)) for i in parts}
+    _, per_part = RegionLoss(mi, labels, parts, targets, 1.3, 0.5)(mi.TensorXf(image))
+    expected = []
+    for k, i in enumerate(parts):
+        pixels = image[labels == k][:, :3].astype(np.float64)
+        level = targets[i][0] + 0.02
+        std = np.sqrt(np.maximum(pixels.var(axis=0), 1e-10))
+        expected.append(np.sum(((1.3 * pixels.mean(axis=0) - targets[i][0]) / level) ** 2) / 3.0
+                        + 0.5 * np.sum(((1.3 * std - targets[i][1]) / level) ** 2) / 3.0)
+    assert np.allclose(np.array(per_part, np.float64), expected, rtol=1e-4)
 
 
 def test_orientation_turns_twice_as_fast_as_stripes() -> None:

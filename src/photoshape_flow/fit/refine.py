@@ -201,9 +201,12 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
 class RegionLoss:
     """`region_loss` of every refined part on a Dr.Jit render, weighted by pixel share (differentiable).
 
-    One scatter-add per statistic (sums of each channel and of its square over every part's pixels)
-    rather than a masked reduction per part and channel: a few kernels per step whatever the part
-    count. `labels` (H, W): the part's position in `parts` for its region's pixels, -1 elsewhere.
+    Each part's pixels are gathered into a block of equal length (padded with masked lanes that
+    read 0), and one block sum per statistic gives every part's sums: a few kernels per step
+    whatever the part count. Not a scatter-add into a per-part array: on the LLVM backend that
+    many-to-few scatter crashed the process now and then (SIGSEGV in Dr.Jit's worker threads while
+    the loss was evaluated; docs/decisions.md D44). `labels` (H, W): the part's position in `parts`
+    for its region's pixels, -1 elsewhere.
     """
 
     def __init__(self, mi: Any, labels: np.ndarray, parts: Sequence[int],
@@ -217,6 +220,13 @@ class RegionLoss:
         self.pixels = mi.UInt32(np.flatnonzero(inside).astype(np.uint32))
         self.labels = mi.UInt32(flat[inside].astype(np.uint32))
         counts = np.bincount(flat[inside], minlength=len(self.parts)).astype(np.float64)
+        members = [np.flatnonzero(flat == k) for k in range(len(self.parts))]
+        self.block = max(1, max(len(x) for x in members))
+        padded = np.zeros((len(self.parts), self.block), np.uint32)
+        valid = np.zeros((len(self.parts), self.block), bool)
+        for k, x in enumerate(members):
+            padded[k, : len(x)], valid[k, : len(x)] = x, True
+        self.block_pixels, self.block_valid = mi.UInt32(padded.ravel()), mi.Bool(valid.ravel())
         self.counts = mi.Float(np.maximum(counts, 1.0).astype(np.float32))
         self.shares = mi.Float((counts / max(counts.sum(), 1.0)).astype(np.float32))
         self.exposure = float(exposure)
@@ -234,10 +244,8 @@ class RegionLoss:
         size = len(self.parts)
         per_part = dr.zeros(mi.Float, size)
         for c in range(3):
-            values = dr.gather(mi.Float, image.array, self.pixels * 4 + c)
-            sums, squares = dr.zeros(mi.Float, size), dr.zeros(mi.Float, size)
-            dr.scatter_add(sums, values, self.labels)
-            dr.scatter_add(squares, values * values, self.labels)
+            values = dr.gather(mi.Float, image.array, self.block_pixels * 4 + c, self.block_valid)
+            sums, squares = dr.block_sum(values, self.block), dr.block_sum(values * values, self.block)
             mean = sums / self.counts
             std = dr.sqrt(dr.maximum(squares / self.counts - mean * mean, 1e-10))
             per_part += dr.square((self.exposure * mean - self.t_mean[c]) / self.level[c]) / 3.0
