@@ -55,10 +55,11 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit import scene as sc
-from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
+from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
 from photoshape_flow.hashing import item_seed
 from photoshape_flow.pipeline import fit_calibration as fc
-from photoshape_flow.pipeline.fit import FitContext, PairData, candidates_of, lighting_estimate
+from photoshape_flow.pipeline.fit import candidates_of, lighting_estimate
+from photoshape_flow.pipeline.fit_context import FitContext, PairData
 from photoshape_flow.pipeline.inference import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
@@ -154,17 +155,6 @@ def partly_degraded(hdr: np.ndarray, ids: np.ndarray, seed: int, keep: set[str])
     return np.ascontiguousarray(decoded[..., ::-1])
 
 
-def upscaled(hdr: np.ndarray, ids: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """The render and its part ids resampled to `size` pixels on their longer side (linear, nearest)."""
-    import cv2
-
-    scale = size / max(ids.shape)
-    height, width = round(ids.shape[0] * scale), round(ids.shape[1] * scale)
-    rows = np.minimum((np.arange(height) / scale).astype(int), ids.shape[0] - 1)
-    cols = np.minimum((np.arange(width) / scale).astype(int), ids.shape[1] - 1)
-    return cv2.resize(np.asarray(hdr, np.float32), (width, height), interpolation=cv2.INTER_LINEAR), ids[rows][:, cols]
-
-
 def white_balances(step: float) -> list[np.ndarray]:
     """Per-channel gains of unit luminance: red and blue each at 1 - step, 1, 1 + step."""
     luminance = np.array([0.2126, 0.7152, 0.0722])
@@ -206,7 +196,7 @@ class Oracle:
         hdr, ids = self.store.load_image(row.blobs["hdr"]), self.store.load_image(row.blobs["part_ids"])
         ids = ids[..., 0] if ids.ndim == 3 else ids
         if self.photo_size:  # degrade at an exemplar's resolution, as exemplars are, then frame like them
-            hdr, ids = upscaled(hdr, ids, self.photo_size)
+            hdr, ids = resampled(hdr, ids, self.photo_size)
         rng = np.random.default_rng(item_seed(self.settings.seed, "fit-calibration", row.kind, row.key))
         seed = int(rng.integers(2**31 - 1))
         if photo_kind.startswith("deg:"):

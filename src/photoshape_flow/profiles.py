@@ -129,6 +129,8 @@ class FitConfig:
     refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
     calibration_cases: int = 48  # validation renders the weights are fitted on (0: the hand-set weights)
     calibration_blurs: tuple[float, ...] = (0.0, 1.0)  # compared on the same renders (empty: `blur` only)
+    calibration_at_exemplar_size: bool = True  # degrade the calibration's photos at the median stored
+    #                                           exemplar's side, not the render's (D45)
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)

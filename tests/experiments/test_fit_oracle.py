@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from experiments.fit_oracle.run import DEGRADATION_PARTS, clean_photo, partly_degraded, upscaled
+from experiments.fit_oracle.run import DEGRADATION_PARTS, clean_photo, partly_degraded
 
 from photoshape_flow.pipeline.fit_calibration import as_photo
 
@@ -30,12 +30,3 @@ def test_one_part_changes_the_photo_and_an_unknown_part_is_refused() -> None:
     assert np.abs(balanced - clean).max() > 0
     with pytest.raises(SystemExit, match="unknown part 'gamma'"):
         partly_degraded(hdr, ids, 11, {"gamma"})
-
-
-def test_upscaled_keeps_the_part_ids_and_the_render_at_the_new_size() -> None:
-    hdr, ids = _render()
-    ids[20:, 20:] = 2
-    big_hdr, big_ids = upscaled(hdr, ids, 100)
-    assert big_hdr.shape == (100, 100, 3) and big_ids.shape == (100, 100)
-    assert set(np.unique(big_ids)) == {0, 1, 2} and big_ids[99, 99] == 2 and big_ids[0, 0] == 0
-    assert abs(float(big_hdr.mean()) - float(hdr.mean())) < 0.02

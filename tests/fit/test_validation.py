@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from photoshape_flow.fit.validation import Misalignment, frame, misalign, sample_misalignment
+from photoshape_flow.fit.validation import Misalignment, frame, misalign, resampled, sample_misalignment
 
 
 def _labels() -> np.ndarray:
@@ -44,3 +44,14 @@ def test_frame_crops_the_silhouette_square() -> None:
     assert rgb.shape == (24, 24, 3) and ids.shape == fg.shape == (24, 24)
     assert fg[:, 0].any() and fg[:, -1].any()  # the wider side fills the frame
     assert rgb[fg].mean() < 120 and rgb[~fg].mean() > 200
+
+
+def test_resampled_keeps_the_part_ids_and_the_render_at_the_new_size() -> None:
+    labels = _labels()
+    hdr = np.where(labels[..., None] > 0, 0.4, 1.0).astype(np.float32) * np.ones(3, np.float32)
+    big_hdr, big_ids = resampled(hdr, labels, 100)
+    assert big_hdr.shape == (100, 100, 3) and big_ids.shape == (100, 100)
+    assert set(np.unique(big_ids)) == {0, 1, 2} and big_ids[30, 50] == 1 and big_ids[0, 0] == 0
+    assert abs(float(big_hdr.mean()) - float(hdr.mean())) < 0.02
+    small_hdr, small_ids = resampled(hdr, labels, 20)  # down as well: the exemplars may be smaller
+    assert small_ids.shape == (20, 20) and set(np.unique(small_ids)) == {0, 1, 2}

@@ -76,6 +76,9 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
         stored = session.execute(sa.select(m.Classifier)).scalar_one().metrics[METRICS_KEY]
     record = stored["record"]
     assert record is not None and record["renders"] >= 1 and record["cases"] >= 1, stored
+    with session_scope(db_url) as session:  # photos degraded at the stored exemplars' median side (D45)
+        sizes = session.execute(sa.select(m.Exemplar.size).where(m.Exemplar.size.is_not(None))).scalars().all()
+    assert sizes and record["photo_size"] == int(np.median(sizes))
     assert report["source"] == "fitted" and report["temperature"] == pytest.approx(record["temperature"], abs=1e-4)
     assert sum(record["weights"].values()) == pytest.approx(1.0, abs=1e-4)
     assert record["blur"] in (0.0, 1.0) and report["blur"] == record["blur"]  # the chosen blur is the stage's

@@ -6,7 +6,9 @@ per part is known; but the stage never sees a perfect part map. Fine alignment i
 misaligned deterministically before it is used, or the weights would learn to trust pixel detail
 (gradients at part boundaries) that real pairs do not have. The photographic degradation itself
 (exposure, white balance, blur, noise, JPEG) is the demo's (`demo.exemplars.degrade`), applied by
-the pipeline adapter.
+the pipeline adapter, at the size the exemplars were stored at (`resampled`): degraded at the
+render's own, smaller size, a photo's blur and JPEG blocks would cover ~3x more of the part than an
+exemplar's do (docs/decisions.md D45).
 """
 
 from __future__ import annotations
@@ -39,6 +41,17 @@ def sample_misalignment(rng: np.random.Generator, size: int) -> Misalignment:
     reach = max(1, int(round(MAX_SHIFT * size / REFERENCE_SIZE)))
     dx, dy = (int(v) for v in rng.integers(-reach, reach + 1, 2))
     return Misalignment(dx, dy, float(rng.uniform(1.0 - MAX_SCALE, 1.0 + MAX_SCALE)), int(rng.integers(-1, 2)))
+
+
+def resampled(hdr: np.ndarray, part_ids: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The render (bilinear) and its part ids (nearest) resampled to `size` pixels on their longer side."""
+    part_ids = np.asarray(part_ids)
+    scale = size / max(part_ids.shape)
+    height, width = round(part_ids.shape[0] * scale), round(part_ids.shape[1] * scale)
+    rows = np.minimum((np.arange(height) / scale).astype(int), part_ids.shape[0] - 1)
+    cols = np.minimum((np.arange(width) / scale).astype(int), part_ids.shape[1] - 1)
+    image = cv2.resize(np.asarray(hdr, np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
+    return image, part_ids[rows][:, cols]
 
 
 def misalign(labels: np.ndarray, error: Misalignment) -> np.ndarray:

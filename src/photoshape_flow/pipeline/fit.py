@@ -21,14 +21,14 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    (publish's and each exemplar's best): tint, roughness scale, UV scale and rotation on the rank-1
    rows' ``refinement``.
 
-Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
+The run's context and each pair's scene are read by `pipeline.fit_context` (shared with the
+calibration). Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
 start from, the candidate set and the lighting key; a pair whose hash is unchanged is skipped, and
 pairs are claimed one at a time (`work_claim`, stage ``fit:<method_key>``) like inference's.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -39,22 +39,25 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.align.partmap import exemplar_at, resize_labels
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.scene import (
-    FitScene,
-    FrameRenderer,
     estimate_lighting,
     render_candidates,
     select_profiled,
 )
 from photoshape_flow.fit.select import rank_candidates, scores_of
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.fit_context import (
+    METHOD,
+    FitContext,
+    PairData,
+    load_pair,
+    weights_report,
+)
 from photoshape_flow.pipeline.fit_refine import is_refined, refine_rows
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
 from photoshape_flow.profiles import FitConfig
@@ -64,10 +67,6 @@ from photoshape_flow.vocab import STATUS_OK
 
 log = logging.getLogger(__name__)
 
-METHOD = "fit"
-CODE_VERSION = "fit-5"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
-#                         fit-4: renders blended with the photo's background at the silhouette (D41);
-#                         fit-5: each candidate judged at its own best exposure (D42)
 LIGHTING_KEY = "fit_lighting"  # exemplar.meta entry
 
 
@@ -82,179 +81,6 @@ class FitSummary:
     changed: int = 0  # parts whose first material differs from the classifier's
     refined: int = 0  # parts whose winner was refined (`pipeline.fit_refine`)
     weights: dict[str, Any] = field(default_factory=dict)  # the cost weights used: fitted or hand-set (D34)
-
-
-def weights_of(cfg: FitConfig) -> Weights:
-    """The profile's hand-set distance weights (the fallback when no fitted ones are stored)."""
-    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight)
-
-
-# -- what one pair is made of ----------------------------------------------------------------------------
-@dataclass
-class PairData:
-    """A pair's scene at the fit resolution and the classifier ranking it starts from."""
-
-    pair: m.Pair
-    scene: FitScene
-    rows: dict[int, list[m.Assignment]]  # part index -> the classifier's rows, best first
-    source_hash: str | None  # params_hash of those rows
-
-    def rank1(self) -> dict[int, int | None]:
-        """Part index -> the classifier's first material."""
-        return {index: rows[0].material_id for index, rows in self.rows.items() if rows}
-
-
-class FitContext:
-    """What one fit run needs once: the classifier, materials, their colours and specs, envmaps, a renderer."""
-
-    def __init__(self, session: Session, store: BlobStore, classifier: m.Classifier, cfg: FitConfig,
-                 renderer: Any = None):
-        from photoshape_flow.pipeline.calibration import material_lab
-
-        self.store = store
-        self.cfg = cfg
-        self.classifier = classifier
-        self.source_key = f"classifier:{classifier.id}"
-        self.method_key = f"{METHOD}:{classifier.id}"
-        mats = session.execute(
-            sa.select(m.Material).where(m.Material.enabled, m.Material.status == STATUS_OK).order_by(m.Material.id)
-        ).scalars().all()
-        self.material_rows = {mat.id: mat for mat in mats}
-        self.material_substance = {mat.id: mat.substance for mat in mats}
-        self.material_labs = {mat.id: lab for mat in mats if (lab := material_lab(mat, store)) is not None}
-        self.untrained = sorted(set(self.material_substance) - {int(x) for x in (classifier.materials or [])})
-        envmaps = session.execute(
-            sa.select(m.Envmap).where(m.Envmap.enabled, m.Envmap.status == STATUS_OK, m.Envmap.blob.is_not(None))
-            .order_by(m.Envmap.id)
-        ).scalars().all()
-        training = [e for e in envmaps if (e.split or "train") == "train"] or list(envmaps)
-        self.envmaps = {e.id: e.blob for e in training}
-        self._renderer = renderer
-        # fitted weights and temperature (`pipeline.fit_calibration`, D34); None: the profile's hand-set ones
-        self.calibration: dict[str, Any] | None = None
-        self._frame: FrameRenderer | None = None
-        self._specs: dict[int, Any] = {}
-        self._meshes: dict[int, Any] = {}
-
-    @property
-    def frame(self) -> FrameRenderer:
-        if self._frame is None:
-            if self._renderer is None:
-                from photoshape_flow.render import Renderer
-
-                self._renderer = Renderer(resolve=self.store.resolve)
-            self._frame = FrameRenderer(self._renderer, self.cfg.size, self.cfg.spp)
-        return self._frame
-
-    def spec(self, material_id: int | None) -> Any:
-        """The render spec of a material (None: the part's built-in material)."""
-        if material_id is None or material_id not in self.material_rows:
-            return None
-        if material_id not in self._specs:
-            from photoshape_flow.pipeline.training_renders import material_spec
-
-            self._specs[material_id] = material_spec(self.material_rows[material_id], self.store)
-        return self._specs[material_id]
-
-    def envmap_spec(self, envmap_id: int | None, rotation: float = 0.0) -> Any:
-        """The render spec of a training envmap at a rotation (None: unknown id, the constant white sky)."""
-        from photoshape_flow.render import EnvmapSpec
-
-        blob = self.envmaps.get(envmap_id) if envmap_id is not None else None
-        return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
-
-    def mesh(self, shape: m.Shape) -> Any:
-        from photoshape_flow.geometry.mesh import ShapeMesh
-
-        if shape.id not in self._meshes:
-            if not shape.mesh_blob:
-                raise ValueError(f"shape {shape.id} has no mesh")
-            self._meshes = {shape.id: ShapeMesh.from_npz_bytes(self.store.read_bytes(shape.mesh_blob))}
-        return self._meshes[shape.id]
-
-    @property
-    def weights(self) -> Weights:
-        """The distance weights in use: the fitted ones when calibrated, else the profile's."""
-        if self.calibration is None:
-            return weights_of(self.cfg)
-        w = self.calibration["weights"]
-        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]), float(w["highlight"]))
-
-    @property
-    def prior_weight(self) -> float:
-        return self.cfg.prior_weight if self.calibration is None else float(self.calibration["weights"]["prior"])
-
-    @property
-    def blur(self) -> float:
-        """The blur in use: the one the calibration chose among `fit.calibration_blurs`, else `fit.blur`."""
-        return self.cfg.blur if self.calibration is None else float(self.calibration.get("blur", self.cfg.blur))
-
-    @property
-    def temperature(self) -> float:
-        """The softmax temperature of the rows' scores (1 with the hand-set weights: uncalibrated)."""
-        return 1.0 if self.calibration is None else float(self.calibration["temperature"])
-
-    @property
-    def params(self) -> dict[str, Any]:
-        weights = None if self.calibration is None else stable_hash(
-            {k: self.calibration.get(k) for k in ("weights", "temperature", "blur")})
-        return {"code": CODE_VERSION, "config": dataclasses.asdict(self.cfg), "source": self.source_key,
-                "fitted_weights": weights}
-
-    def lighting_key(self, reference_pair: int, reference_hash: str | None) -> str:
-        """What a stored lighting estimate depends on: its pair and ranking, the envmaps, the config."""
-        return stable_hash({**self.params, "pair": reference_pair, "ranking": reference_hash,
-                            "envmaps": sorted(self.envmaps.items())})
-
-
-def weights_report(ctx: FitContext) -> dict[str, Any]:
-    """What a run says about its cost: fitted (with the held-out figures) or the profile's hand-set fallback."""
-    w = ctx.weights
-    out: dict[str, Any] = {"source": "hand-set" if ctx.calibration is None else "fitted",
-                           "color": round(w.color, 4), "contrast": round(w.contrast, 4),
-                           "gradient": round(w.gradient, 4), "highlight": round(w.highlight, 4),
-                           "prior": round(ctx.prior_weight, 4),
-                           "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
-    if ctx.calibration is not None:
-        out["cases"] = ctx.calibration.get("cases")
-        out["held_out"] = ctx.calibration.get("held_out")
-    return out
-
-
-def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
-    """A pair's photo, aligned regions and classifier rows at the fit resolution; a one-line error when incomplete."""
-    from photoshape_flow.render import Camera
-
-    shape, exemplar = session.get(m.Shape, pair.shape_id), session.get(m.Exemplar, pair.exemplar_id)
-    if shape is None or exemplar is None or not exemplar.image_blob:
-        raise ValueError(f"pair {pair.id}: shape or exemplar image missing")
-    alignment = session.execute(
-        sa.select(m.Alignment).where(m.Alignment.pair_id == pair.id, m.Alignment.method == ALIGNMENT_METHOD,
-                                     m.Alignment.status == STATUS_OK)
-    ).scalar_one_or_none()
-    blob = alignment and (alignment.crf_blob or alignment.flow_blob or alignment.coarse_blob)
-    if not blob:
-        raise ValueError(f"pair {pair.id}: no fine alignment")
-    size = ctx.cfg.size
-    image = ctx.store.load_image(exemplar.image_blob)
-    mask = ctx.store.load_image(exemplar.mask_blob) if exemplar.mask_blob else np.full(image.shape[:2], 255, np.uint8)
-    rgb, foreground = exemplar_at(image, mask, size)
-    labels = ctx.store.load_image(blob)
-    labels = resize_labels(labels[..., 0] if labels.ndim == 3 else labels, size).astype(np.int32)
-    by_part = dict(session.execute(sa.select(m.Part.id, m.Part.index).where(m.Part.shape_id == shape.id)).all())
-    rows: dict[int, list[m.Assignment]] = {}
-    source_hash = None
-    for row in session.execute(
-        sa.select(m.Assignment).where(m.Assignment.pair_id == pair.id, m.Assignment.method_key == ctx.source_key)
-        .order_by(m.Assignment.part_id, m.Assignment.rank)
-    ).scalars():
-        rows.setdefault(by_part[row.part_id], []).append(row)
-        source_hash = row.params_hash
-    observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
-    camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.blur,
-                                foreground=foreground)
-    return PairData(pair, scene, rows, source_hash)
 
 
 def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:

@@ -4,10 +4,12 @@ Issue 26: "every weight and temperature is fitted on validation renders, never o
 the evaluation worlds". A validation render (kinds `training`/`bootstrap`, split `val`: val shapes
 under val envmaps, true material of every part known from its spec) becomes a calibration photo:
 
-1. degraded as the demo degrades its exemplars (`demo.exemplars.degrade`: exposure, white balance,
-   blur, noise; then a JPEG round trip), framed like an exemplar (`fit.validation.frame`), and its
-   exact part map misaligned as fine alignment errs (`fit.validation.misalign`), all seeded by the
-   render's key and the global seed;
+1. resampled to the side the collection's exemplars are stored at (the median crop, `exemplar_size`;
+   `fit.calibration_at_exemplar_size`), degraded there as the demo degrades its exemplars
+   (`demo.exemplars.degrade`: exposure, white balance, blur, noise; then a JPEG round trip), framed
+   like an exemplar (`fit.validation.frame`), and its exact part map misaligned as fine alignment
+   errs (`fit.validation.misalign`), all seeded by the render's key and the global seed; degraded at
+   the render's own size instead, a photo is ~3x blurrier than an exemplar (D45);
 2. ranked by the classifier as inference ranks a part (material head, stored colour likelihood,
    and, since the substance network is not re-run on renders, the classifier's own substance head,
    as `pipeline.calibration.posterior_reliability` does): the prior of the candidates;
@@ -20,7 +22,7 @@ Each blur of `fit.calibration_blurs` measures the same renders (rendered once, `
 blur with the lowest cross-validated log-loss is kept. The weights and temperature are fitted on
 all its cases (`fit.calibrate.fit`, centred on the hand-set weights) and stored in the
 classifier's `metrics["fit_calibration"]` with a key of everything they depend on (code, fit config,
-checkpoint, the sampled renders, enabled materials, training envmaps, seed), like the D24
+checkpoint, the sampled renders, enabled materials, training envmaps, exemplar size, seed), like the D24
 calibrations; `run_fit` computes them when the key changed and the stage then ranks with them. Two
 workers that start `fit` at once may both compute them: the result is deterministic, so they write
 the same record. Reported with them: 2-fold cross-validated log-loss and top-1 (folds by render) of
@@ -45,14 +47,14 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit.scene import FitScene, FrameRenderer, exposure_grid, profiled_terms, render_candidates
-from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
+from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.vocab import STATUS_OK
 
 log = logging.getLogger(__name__)
 
-CODE_VERSION = "fit-calibration-1"
+CODE_VERSION = "fit-calibration-2"  # 2: photos degraded at the exemplars' size (D45)
 METRICS_KEY = "fit_calibration"  # classifier.metrics entry
 KINDS = ("training", "bootstrap")  # both rounds' val renders: val shapes under val envmaps
 
@@ -95,6 +97,13 @@ def validation_renders(session: sa.orm.Session, count: int, seed: int) -> list[m
     rows = [r for r in rows if {"hdr", "part_ids"} <= set(r.blobs or {}) and r.shape_id is not None]
     rows.sort(key=lambda r: (item_seed(seed, "fit-calibration", r.kind, r.key), r.id))
     return rows[: max(0, count)]
+
+
+def exemplar_size(session: sa.orm.Session) -> int | None:
+    """The median side of the stored exemplar crops (None: no exemplar stored yet)."""
+    sizes = session.execute(sa.select(m.Exemplar.size).where(
+        m.Exemplar.status == STATUS_OK, ~m.Exemplar.exclude, m.Exemplar.size.is_not(None))).scalars().all()
+    return int(np.median(sizes)) if sizes else None
 
 
 def as_photo(hdr: np.ndarray, part_ids: np.ndarray, seed: int) -> np.ndarray:
@@ -149,10 +158,14 @@ class RenderRanker:
         return out
 
 
-def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering,
-                 settings: Settings) -> tuple[list[cal.Case], dict[str, int]]:
-    """The calibration cases of one validation render, and counts (parts observed, true among candidates)."""
-    from photoshape_flow.pipeline.fit import PairData, candidates_of, lighting_estimate
+def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Settings,
+                 photo_size: int | None = None) -> tuple[list[cal.Case], dict[str, int]]:
+    """The calibration cases of one validation render, and counts (parts observed, true among candidates).
+
+    `photo_size`: the side the photo is degraded at (None: the render's own).
+    """
+    from photoshape_flow.pipeline.fit import candidates_of, lighting_estimate
+    from photoshape_flow.pipeline.fit_context import PairData
     from photoshape_flow.render import Camera
     from photoshape_flow.synth.spec import RenderSpec
 
@@ -160,6 +173,8 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering,
     truth = spec.material_by_index()
     hdr, ids = ctx.store.load_image(row.blobs["hdr"]), ctx.store.load_image(row.blobs["part_ids"])
     ids = ids[..., 0] if ids.ndim == 3 else ids
+    if photo_size:
+        hdr, ids = resampled(hdr, ids, photo_size)
     rng = np.random.default_rng(item_seed(settings.seed, "fit-calibration", row.kind, row.key))
     rgb, labels, foreground = frame(as_photo(hdr, ids, int(rng.integers(2**31 - 1))), ids, ctx.cfg.size)
     labels = misalign(labels, sample_misalignment(rng, ctx.cfg.size))
@@ -226,21 +241,22 @@ def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:
     return {"cases": sum(s.cases for s in out["fitted"]), **{k: pooled(v) for k, v in out.items()}}
 
 
-def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int) -> str:
+def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int, photo_size: int | None = None) -> str:
     """What a stored calibration depends on (a change of any re-fits it)."""
     return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
-                        "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed,
+                        "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed, "photo_size": photo_size,
                         "renders": [[r.kind, r.key, r.params_hash] for r in renders],
                         "materials": sorted(ctx.material_substance), "envmaps": sorted(ctx.envmaps.items())})
 
 
 def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering],
-                    progress: Progress | None = None) -> dict[str, Any] | None:
+                    progress: Progress | None = None, photo_size: int | None = None) -> dict[str, Any] | None:
     """The calibration record of `renders` (see the module docstring); None when no usable case came out.
 
     Every blur of `fit.calibration_blurs` (or `fit.blur` alone) builds its cases from the same
     renders; the blur whose fitted cost has the lowest cross-validated log-loss is kept (in-sample
     log-loss when a fold is empty), and the weights and temperature are refitted on all its cases.
+    `photo_size`: the side the photos are degraded at (None: each render's own).
     """
     started = time.perf_counter()
     ranker = RenderRanker(ctx, settings)
@@ -248,13 +264,14 @@ def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering]
     frame = CachedFrame(plain)
     ctx._frame = frame  # the blur contexts below share it; the stage gets the plain one back
     try:
-        return _fit_cases(ctx, settings, renders, ranker, frame, started, progress)
+        return _fit_cases(ctx, settings, renders, ranker, frame, started, progress, photo_size)
     finally:
         ctx._frame = plain
 
 
 def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ranker: RenderRanker,
-               frame: CachedFrame, started: float, progress: Progress | None = None) -> dict[str, Any] | None:
+               frame: CachedFrame, started: float, progress: Progress | None = None,
+               photo_size: int | None = None) -> dict[str, Any] | None:
     """`fit_calibration`'s loop over renders and blurs, then the fit of the best blur."""
     blurs = tuple(dict.fromkeys(float(b) for b in (ctx.cfg.calibration_blurs or (ctx.cfg.blur,))))
     contexts = {b: with_blur(ctx, b) for b in blurs}
@@ -263,7 +280,7 @@ def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ran
     for row in counted(progress, "fit calibration renders", renders):
         frame.clear()
         try:
-            found = {b: render_cases(contexts[b], ranker, row, settings) for b in blurs}
+            found = {b: render_cases(contexts[b], ranker, row, settings, photo_size) for b in blurs}
         except (ValueError, OSError) as exc:  # one unreadable or invisible render never stops the fit
             log.warning("fit calibration: %s/%s skipped: %s", row.kind, row.key, exc)
             counts["failed"] += 1
@@ -297,7 +314,8 @@ def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ran
         log.warning("fit calibration: no term carries information on these cases; hand-set weights")
         return None
     record = {"weights": dict(zip(cal.TERMS, (round(w, 6) for w in fitted.weights), strict=True)),
-              "temperature": round(fitted.temperature, 6), "blur": blur, **by_blur[str(blur)], **counts,
+              "temperature": round(fitted.temperature, 6), "blur": blur, "photo_size": photo_size,
+              **by_blur[str(blur)], **counts,
               "by_blur": by_blur, "seconds": round(time.perf_counter() - started, 2)}
     log.info("fit calibration (classifier %s): blur %s, weights %s, temperature %.3f on %d cases from %d renders "
              "(%.1f s); held out: %s", ctx.classifier.id, blur, record["weights"], fitted.temperature,
@@ -312,13 +330,14 @@ def ensure_calibration(ctx: Any, settings: Settings, progress: Progress | None =
     url = settings.resolved_database_url
     with session_scope(url) as session:
         renders = validation_renders(session, ctx.cfg.calibration_cases, settings.seed)
-        key = calibration_key(ctx, renders, settings.seed)
+        photo_size = exemplar_size(session) if ctx.cfg.calibration_at_exemplar_size else None
+        key = calibration_key(ctx, renders, settings.seed, photo_size)
         classifier = session.get(m.Classifier, ctx.classifier.id)
         stored = (classifier.metrics or {}).get(METRICS_KEY) if classifier is not None else None
         session.expunge_all()
     if isinstance(stored, dict) and stored.get("key") == key:
         return stored.get("record")
-    record = fit_calibration(ctx, settings, renders, progress) if renders else None
+    record = fit_calibration(ctx, settings, renders, progress, photo_size) if renders else None
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, ctx.classifier.id)
         if classifier is not None:  # stored even when None: the hand-set fallback is not re-tried every run

@@ -85,7 +85,8 @@ def affected_pairs(session: Session) -> tuple[str | None, list[int]]:
     part (`fit.candidates`), so these are exactly the pairs whose candidate set the new materials
     join; a pair with no observed part keeps the classifier's ranking and is left alone.
     """
-    from photoshape_flow.pipeline.fit import METHOD, fit_pairs_of
+    from photoshape_flow.pipeline.fit import fit_pairs_of
+    from photoshape_flow.pipeline.fit_context import METHOD
     from photoshape_flow.pipeline.inference import resolve_classifier
 
     classifier = resolve_classifier(session)
