@@ -130,7 +130,12 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
         # every pair is used (rank 1): each observed winner refined, on its rank-1 row only
         refined = [ranked[0].refinement for ranked in observed.values()]
         assert all(r is not None for r in refined)
-        assert first.details[f"fit:{rows[0].classifier_id}"]["parts_refined"] == len(refined)
+        report = first.details[f"fit:{rows[0].classifier_id}"]
+        assert report["parts_refined"] == len(refined)
+        # the report times each phase of issue 26 item 7's budget, per unit of that budget
+        assert {"reading", "lighting", "selection", "refinement"} <= set(report["seconds"])
+        assert report["selection_per_pair"] == pytest.approx(report["seconds"]["selection"] / first.done, abs=0.01)
+        assert report["lighting_per_exemplar"] > 0 and report["refinement_per_refined_pair"] > 0
         assert all(r.refinement is None for ranked in by_part.values() for r in ranked[1:])
         assert all(0.5 <= min(r["tint"]) and max(r["tint"]) <= 2.0 and 0.5 <= r["roughness_scale"] <= 2.0
                    for r in refined)

@@ -30,7 +30,9 @@ pairs are claimed one at a time (`work_claim`, stage ``fit:<method_key>``) like 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -80,7 +82,30 @@ class FitSummary:
     lightings: int = 0  # lighting estimates computed (not reused)
     changed: int = 0  # parts whose first material differs from the classifier's
     refined: int = 0  # parts whose winner was refined (`pipeline.fit_refine`)
+    refined_pairs: int = 0
+    # wall seconds per phase (calibration, reading, lighting, selection, refinement): issue 26 item 7's
+    # budgets are per phase (selection per pair, lighting per exemplar, refinement per refined pair)
+    seconds: dict[str, float] = field(default_factory=dict)
     weights: dict[str, Any] = field(default_factory=dict)  # the cost weights used: fitted or hand-set (D34)
+
+    @contextmanager
+    def timed(self, phase: str) -> Iterator[None]:
+        """Adds the block's wall time to `seconds[phase]`, also when it raises."""
+        started = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[phase] = self.seconds.get(phase, 0.0) + time.perf_counter() - started
+
+    def per_unit(self) -> dict[str, float | None]:
+        """Seconds per unit of each phase's budget: selection per fitted pair, lighting per estimate,
+        refinement per refined pair (None where nothing of that unit was done)."""
+        def ratio(phase: str, count: int) -> float | None:
+            return round(self.seconds.get(phase, 0.0) / count, 3) if count else None
+
+        return {"selection_per_pair": ratio("selection", self.pairs_done),
+                "lighting_per_exemplar": ratio("lighting", self.lightings),
+                "refinement_per_refined_pair": ratio("refinement", self.refined_pairs)}
 
 
 def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:
@@ -257,7 +282,8 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
         from photoshape_flow.pipeline.fit_calibration import ensure_calibration
 
         try:
-            ctx.calibration = ensure_calibration(ctx, settings, progress)
+            with summary.timed("calibration"):
+                ctx.calibration = ensure_calibration(ctx, settings, progress)
         except Exception as exc:  # the hand-set weights still rank; the report and the log say why
             log.warning("fit: calibration failed (%s: %s); hand-set weights", type(exc).__name__, exc)
             summary.weights["error"] = f"{type(exc).__name__}: {exc}"[:500]
@@ -268,10 +294,12 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
             with session_scope(url) as session:
                 pair = session.get(m.Pair, pair_id)
                 assert pair is not None
-                data = load_pair(session, ctx, pair)
-                candidates = candidates_of(ctx, data)
+                with summary.timed("reading"):
+                    data = load_pair(session, ctx, pair)
+                    candidates = candidates_of(ctx, data)
                 # nothing observed: the ranking is copied, no lighting needed
-                light, computed = exemplar_lighting(session, ctx, data) if candidates else ({"key": None}, False)
+                with summary.timed("lighting"):
+                    light, computed = exemplar_lighting(session, ctx, data) if candidates else ({"key": None}, False)
                 summary.lightings += int(computed)
                 refine = bool(candidates) and is_refined(session, ctx, pair)
                 digest = pair_hash(ctx, data, candidates, str(light["key"]), refine)
@@ -281,10 +309,13 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                     summary.pairs_skipped += 1
                     continue
             with session_scope(url) as session:
-                measured, exposure = select_materials(ctx, data, candidates, light)
-                rows = fit_rows(ctx, data, candidates, measured, exposure, digest)
+                with summary.timed("selection"):
+                    measured, exposure = select_materials(ctx, data, candidates, light)
+                    rows = fit_rows(ctx, data, candidates, measured, exposure, digest)
                 if refine:
-                    summary.refined += refine_rows(ctx, data, rows, light, exposure)
+                    with summary.timed("refinement"):
+                        summary.refined += refine_rows(ctx, data, rows, light, exposure)
+                    summary.refined_pairs += 1
                 session.execute(sa.delete(m.Assignment).where(m.Assignment.pair_id == pair_id,
                                                               m.Assignment.method_key == ctx.method_key))
                 session.add_all(rows)
@@ -298,7 +329,8 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
             summary.pairs_failed.append((pair_id, reason))
             with session_scope(url) as session:
                 claims.fail(session, stage, str(pair_id), reason)
-    log.info("fit %s: %d pairs, %d rows, %d parts changed, %d refined, %d skipped, %d failed, %d lighting estimates",
-             ctx.method_key, summary.pairs_done, summary.rows, summary.changed, summary.refined, summary.pairs_skipped,
-             len(summary.pairs_failed), summary.lightings)
+    log.info("fit %s: %d pairs, %d rows, %d parts changed, %d refined, %d skipped, %d failed, %d lighting estimates; "
+             "seconds %s", ctx.method_key, summary.pairs_done, summary.rows, summary.changed, summary.refined,
+             summary.pairs_skipped, len(summary.pairs_failed), summary.lightings,
+             {k: round(v, 1) for k, v in summary.seconds.items()})
     return summary

@@ -36,5 +36,6 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
         details={summary.method_key or "fit": {"pairs": summary.pairs_done, "rows": summary.rows,
                                                "parts_changed": summary.changed, "parts_refined": summary.refined,
                                                "lightings": summary.lightings, "weights": summary.weights,
-                                               "failed": summary.pairs_failed[:20]}},
+                                               "seconds": {k: round(v, 2) for k, v in summary.seconds.items()},
+                                               **summary.per_unit(), "failed": summary.pairs_failed[:20]}},
     )
