@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Every benchmark, one after the other (they must not share the CPU), logs in bench/results/.
-#   bash bench/run_all.sh [DEMO_MEDIUM_DIR]
+#   [FIT_DATA_ROOT=DIR] bash bench/run_all.sh [DEMO_MEDIUM_DIR]
 # DEMO_MEDIUM_DIR: a generated medium demo collection (<data_root>/demo/medium) for the HOG channel
 # choice and the bf16 recall on real descriptors; generated into /tmp when absent.
 set -euo pipefail
@@ -16,3 +16,5 @@ run retrieval bench/retrieval.py
 run fine_alignment bench/fine_alignment.py
 run classifier bench/classifier.py
 run ingest bench/ingest.py
+# the fit stage's budgets need a data root that has run to `fit` (e.g. the second world's, or a medium demo's)
+if [ -n "${FIT_DATA_ROOT:-}" ]; then run fit bench/fit.py --data-root "$FIT_DATA_ROOT"; fi
