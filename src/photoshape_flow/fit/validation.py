@@ -47,11 +47,9 @@ def resampled(hdr: np.ndarray, part_ids: np.ndarray, size: int) -> tuple[np.ndar
     """The render (bilinear) and its part ids (nearest) resampled to `size` pixels on their longer side."""
     part_ids = np.asarray(part_ids)
     scale = size / max(part_ids.shape)
-    height, width = round(part_ids.shape[0] * scale), round(part_ids.shape[1] * scale)
-    rows = np.minimum((np.arange(height) / scale).astype(int), part_ids.shape[0] - 1)
-    cols = np.minimum((np.arange(width) / scale).astype(int), part_ids.shape[1] - 1)
-    image = cv2.resize(np.asarray(hdr, np.float32), (width, height), interpolation=cv2.INTER_LINEAR)
-    return image, part_ids[rows][:, cols]
+    shape = (round(part_ids.shape[1] * scale), round(part_ids.shape[0] * scale))  # (width, height)
+    return (cv2.resize(np.asarray(hdr, np.float32), shape, interpolation=cv2.INTER_LINEAR),
+            cv2.resize(part_ids, shape, interpolation=cv2.INTER_NEAREST))
 
 
 def misalign(labels: np.ndarray, error: Misalignment) -> np.ndarray:
