@@ -134,19 +134,26 @@ class FitConfig:
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)
+DEFAULT_PUBLISH_METHOD = "fit"  # ahead of the classifier's ranking on the second world (D46)
+
+
+def writing_stage(method: str) -> str:
+    """The stage that writes a method's (or method key's) assignments: `fit` its own, inference the others."""
+    return "fit" if method.partition(":")[0] == "fit" else "inference"
 
 
 @dataclass(frozen=True)
 class PublishConfig:
     """Which pairs become PhotoShapes, whose assignments they show, at what quality they are rendered.
 
-    `method` names whose rank-1 assignments publish renders, exports and lists in the gallery: the
-    paper's classifier ranking (each pair's newest classifier) until `fit` beats it on the second
-    world, when switching is this one field (docs/decisions.md D36). The CLI and the flows both read it.
+    `method` names whose rank-1 assignments publish renders, exports and lists in the gallery: `fit`
+    (materials chosen by rendering each pair against its photo), whose rank-1 beats the paper's
+    classifier ranking on the second world (docs/decisions.md D46), or `classifier` (each pair's
+    newest classifier). The CLI and the flows both read it.
     """
 
     max_rank: int = 12  # publish pairs up to this rank per shape
-    method: str = "classifier"  # one of PUBLISH_METHODS
+    method: str = DEFAULT_PUBLISH_METHOD  # one of PUBLISH_METHODS
     views: int = 8
     size: int = 256
     spp: int = 64

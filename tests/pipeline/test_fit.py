@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sqlalchemy as sa
+from tests.db.test_claims import hold_in_helper
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -121,6 +122,10 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
         observed = {key: ranked for key, ranked in by_part.items() if ranked[0].params["fit"].get("cost") is not None}
         for ranked in observed.values():
             assert [r.rank for r in ranked] == list(range(1, len(ranked) + 1))
+            assert sum(r.score for r in ranked) == pytest.approx(1.0)  # a distribution over the candidates
+            # the gallery's confidence: the score where the weights were fitted (calibrated), else none
+            fitted = first.details[f"fit:{rows[0].classifier_id}"]["weights"]["source"] == "fitted"
+            assert [r.posterior for r in ranked] == [r.score if fitted else None for r in ranked]
             costs = [r.params["fit"]["cost"] for r in ranked]
             assert costs == sorted(costs) and {"ranking", "colour"} <= {r.params["fit"]["source"] for r in ranked}
             assert untrained in {r.material_id for r in ranked}  # a material the classifier never saw competes
@@ -151,8 +156,16 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
     before = _fit_rows(db_url)
     again = run_stage("fit", "tiny", ctx)
     assert (again.done, again.skipped, again.failed) == (0, len(pairs) + 1, 0) and _fit_rows(db_url) == before
-    relit = run_stage("fit", resolve_profile("tiny", ["fit.lighting_rounds=2"]), ctx)
-    assert relit.done == len(pairs) + 1  # a changed config changes every pair's hash and every lighting key
+    held = min(pairs)
+    helper = hold_in_helper(db_url, f"fit:{rows[0].method_key}", [str(held)], seconds=120)
+    try:
+        relit = run_stage("fit", resolve_profile("tiny", ["fit.lighting_rounds=2"]), ctx)
+    finally:
+        helper.kill()
+        helper.wait()
+    # a changed config changes every pair's hash and every lighting key; the pair another live worker
+    # holds is blocked, not skipped, so `run all` stops (or waits) before publish would show it unfitted
+    assert (relit.done, relit.blocked.count) == (len(pairs), 1)
     with session_scope(db_url) as session:
         rounds = [e.meta["fit_lighting"]["rounds"] for e in session.execute(sa.select(m.Exemplar)).scalars()
                   if "fit_lighting" in (e.meta or {})]

@@ -64,7 +64,8 @@ def test_a_work_unit_keeps_only_the_affected_items_in_its_order() -> None:
 def test_publish_method_is_a_validated_profile_field() -> None:
     from photoshape_flow.profiles import ProfileError, resolve_profile
 
-    assert resolve_profile("tiny").profile.publish.method == "classifier"
+    assert resolve_profile("tiny").profile.publish.method == "fit"  # D46
+    assert resolve_profile("tiny", ["publish.method=classifier"]).profile.publish.method == "classifier"
     assert resolve_profile("tiny", ["publish.method=fit"]).profile.publish.method == "fit"
     with pytest.raises(ProfileError, match="publish.method"):
         resolve_profile("tiny", ["publish.method=colour"])

@@ -13,6 +13,8 @@ from tests.export.tiny import make_envmap, make_material_maps, make_tiny_shape
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 
+METHOD = "fit"  # publish's default method (D46): the seeded rows are what publish shows unless told otherwise
+
 
 def seed(url: str, store, tmp_path: Path) -> dict[str, int]:  # type: ignore[no-untyped-def]
     """One shape (2 parts), two exemplars, two SVBRDF materials, two envmaps, two pairs with assignments.
@@ -67,8 +69,8 @@ def seed(url: str, store, tmp_path: Path) -> dict[str, int]:  # type: ignore[no-
                 [(parts[0], first, 0.8), (parts[1], materials["steel_02"], 0.6),
                  (parts[0], materials["steel_02"], 0.1)]
             ):
-                s.add(m.Assignment(pair_id=pair.id, part_id=part_id, method="classifier",
-                                   classifier_id=classifier.id, method_key=f"classifier:{classifier.id}",
+                s.add(m.Assignment(pair_id=pair.id, part_id=part_id, method=METHOD,
+                                   classifier_id=classifier.id, method_key=f"{METHOD}:{classifier.id}",
                                    rank=1 if rank < 2 else 2, material_id=material_id, score=score,
                                    substance="wood" if material_id != materials["steel_02"] else "metal",
                                    params={"uv": {"scale": 1.2, "rotation": 0.3, "offset": [0.1, 0.0]}}
@@ -92,7 +94,7 @@ def test_publish_renders_exports_and_resumes(db_url, store, tmp_path):
     from photoshape_flow.pipeline.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
-    mk = f"classifier:{ids['classifier']}"
+    mk = f"{METHOD}:{ids['classifier']}"
     summary = run_publish(views=2, size=16, spp=2, formats=("glb", "xml", "obj"))
     assert summary.candidates == 2 and summary.envmap == "studio_soft"
     assert summary.rendered == 4 and summary.exported == 1  # good pair: exemplar + 2 turntable + builtin
@@ -204,7 +206,7 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     out = tmp_path / "out"
     result = runner.invoke(app, ["export", str(ids["good"]), "--out", str(out), "--format", "glb,obj", "--json"])
     assert result.exit_code == 0, result.output
-    folder = out / f"{ids['good']}-classifier-{ids['classifier']}"
+    folder = out / f"{ids['good']}-{METHOD}-{ids['classifier']}"
     assert (folder / "photoshape.glb").is_file() and (folder / "photoshape.obj").is_file()
     assert json.loads((folder / "assignment.json").read_text())["pair_id"] == ids["good"]
     # every candidate: the broken one is reported, the good one still written
@@ -218,6 +220,28 @@ def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp
     assert none.exit_code == 1 and "no candidates" in none.output
 
 
+def test_commands_default_to_the_collections_publish_method(db_url, store, tmp_path):
+    """Without --method, export and gallery show what the collection's last run published (D46)."""
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+    from photoshape_flow.pipeline.runs import published_method
+
+    seed(db_url, store, tmp_path)  # fit rows only
+    runner = CliRunner()
+    with session_scope(db_url) as s:
+        assert published_method(s) == "fit"  # before any run: the default
+        s.add(m.PipelineRun(origin="cli", profile_name="tiny", overrides={"publish.method": "classifier"},
+                            stages=["publish"], status="ok"))
+    with session_scope(db_url) as s:
+        assert published_method(s) == "classifier"
+    result = runner.invoke(app, ["export", "--out", str(tmp_path / "out"), "--format", "glb"])
+    assert result.exit_code == 1, result.output
+    assert "no candidates for method 'classifier'" in result.output and "photoshape run inference" in result.output
+    result = runner.invoke(app, ["gallery", str(tmp_path / "site")])
+    assert result.exit_code == 0 and "gallery: 0 published PhotoShape(s); 0 candidate(s)" in result.output
+
+
 @pytest.mark.render
 def test_published_xml_renders_the_gallery_image(db_url, store, tmp_path):
     """The exported Mitsuba XML, reloaded, renders the published exemplar-view image: same framing
@@ -228,7 +252,7 @@ def test_published_xml_renders_the_gallery_image(db_url, store, tmp_path):
     from photoshape_flow.render.tonemap import composite
 
     ids = seed(db_url, store, tmp_path)
-    mk, good = f"classifier:{ids['classifier']}", ids["good"]
+    mk, good = f"{METHOD}:{ids['classifier']}", ids["good"]
     run_publish(views=0, size=24, spp=4, formats=("xml",))
     row = _renderings(db_url)[("photoshape", f"{good}/{mk}/exemplar")]
     published, coverage = store.load_image(row.blobs["srgb"]), store.load_image(row.blobs["alpha"])
@@ -262,8 +286,8 @@ def _rerank_with_a_new_classifier(url: str, pair_id: int) -> int:
                         .order_by(m.Assignment.part_id)).scalars().all()
         materials = [a.material_id for a in old][::-1]  # swapped: another PhotoShape of the same pair
         for a, material_id in zip(old, materials, strict=True):
-            s.add(m.Assignment(pair_id=pair_id, part_id=a.part_id, method="classifier", classifier_id=classifier.id,
-                               method_key=f"classifier:{classifier.id}", rank=1, material_id=material_id,
+            s.add(m.Assignment(pair_id=pair_id, part_id=a.part_id, method=METHOD, classifier_id=classifier.id,
+                               method_key=f"{METHOD}:{classifier.id}", rank=1, material_id=material_id,
                                score=0.5, substance=a.substance))
         return classifier.id
 
@@ -276,11 +300,11 @@ def test_grade_belongs_to_the_photoshape_it_was_given_to(db_url, store, tmp_path
     from photoshape_flow.pipeline.photoshapes import assignment_set_keys
 
     ids = seed(db_url, store, tmp_path)
-    good, old_key = ids["good"], f"classifier:{ids['classifier']}"
+    good, old_key = ids["good"], f"{METHOD}:{ids['classifier']}"
     runner = CliRunner()
     result = runner.invoke(app, ["grade", str(good), "wrong_color", "--note", "seat too red"])
     assert result.exit_code == 0 and f"pair {good} ({old_key}): graded wrong_color" in result.output, result.output
-    new_key = f"classifier:{_rerank_with_a_new_classifier(db_url, good)}"
+    new_key = f"{METHOD}:{_rerank_with_a_new_classifier(db_url, good)}"
 
     result = runner.invoke(app, ["gallery", str(tmp_path / "site")])
     assert result.exit_code == 0 and "gallery candidates: 2/2 (100%)" in result.output, result.output
@@ -308,7 +332,7 @@ def test_gallery_opens_on_published_photoshapes_and_publishes_on_demand(db_url, 
     from photoshape_flow.cli import app
 
     ids = seed(db_url, store, tmp_path)
-    good, mk = ids["good"], f"classifier:{ids['classifier']}"
+    good, mk = ids["good"], f"{METHOD}:{ids['classifier']}"
     with session_scope(db_url) as s:
         s.get(m.Pair, good).rank = 40  # beyond any profile's max_rank: only --pair publishes it
     runner = CliRunner()
@@ -352,7 +376,7 @@ def test_publish_renders_and_exports_the_refined_look_with_a_before_after(db_url
     from photoshape_flow.render.tonemap import composite
 
     ids = seed(db_url, store, tmp_path)
-    mk, good = f"classifier:{ids['classifier']}", ids["good"]
+    mk, good = f"{METHOD}:{ids['classifier']}", ids["good"]
     with session_scope(db_url) as s:
         before_key = assignment_set_keys(s, [(good, mk)])[(good, mk)]
         row = s.execute(sa.select(m.Assignment).where(m.Assignment.pair_id == good, m.Assignment.rank == 1)

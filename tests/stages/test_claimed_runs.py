@@ -19,6 +19,7 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.stages import STAGES, StageContext, StageReport, WorkUnit, process
 
 runner = CliRunner()
@@ -116,8 +117,9 @@ def test_publish_claims_a_pair_again_when_a_new_classifier_assigns_it(db_url: st
     seen: list[tuple[int, ...]] = []
     _fake_stage(monkeypatch, "publish", seen)
     ctx, unit = StageContext.create(), WorkUnit("pairs", (ids["pair"],))
-    assert process("publish", unit, "tiny", ctx).done == 1
-    assert process("publish", unit, "tiny", ctx).skipped == 1  # published, same assignment
+    shown = resolve_profile("tiny", ["publish.method=classifier"])  # the seeded rows are the classifier's
+    assert process("publish", unit, shown, ctx).done == 1
+    assert process("publish", unit, shown, ctx).skipped == 1  # published, same assignment
     with session_scope(db_url) as session:  # a retrained classifier's ranking of the same pair
         newer = m.Classifier(name="r34-2", kind="material", architecture="resnet34", materials=[0, oak])
         session.add(newer)
@@ -126,7 +128,7 @@ def test_publish_claims_a_pair_again_when_a_new_classifier_assigns_it(db_url: st
         session.add_all([m.Assignment(pair_id=ids["pair"], part_id=part, method="classifier", classifier_id=newer.id,
                                       method_key=f"classifier:{newer.id}", rank=1, material_id=oak, score=0.7)
                          for part in parts])
-    again = process("publish", unit, "tiny", ctx)
+    again = process("publish", unit, shown, ctx)
     assert again.done == 1 and seen == [unit.ids, unit.ids]
 
 

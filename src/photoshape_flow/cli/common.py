@@ -69,6 +69,18 @@ def require_database() -> None:
         fail(f"{url}: not migrated; run `photoshape db upgrade`")
 
 
+def method_or_published(method: str | None) -> str:
+    """`--method` as given, else the method the collection publishes with (its last run's `publish.method`)."""
+    if method:
+        return method
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db.session import session_scope
+    from photoshape_flow.pipeline.runs import published_method
+
+    with session_scope(get_settings().resolved_database_url) as session:
+        return published_method(session)
+
+
 def resolve_profile_or_fail(name: str, overrides: list[str] | None):  # type: ignore[no-untyped-def]
     """`--profile NAME --set a.b=c ...` validated, or one line naming what is wrong."""
     from photoshape_flow.profiles import ProfileError, resolve_profile

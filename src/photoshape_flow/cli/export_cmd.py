@@ -8,18 +8,27 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, err_console, fail, require_database, shown
+from photoshape_flow.cli.common import (
+    console,
+    err_console,
+    fail,
+    method_or_published,
+    require_database,
+    shown,
+)
 from photoshape_flow.cli.progress import cli_progress
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, parse_formats
+from photoshape_flow.profiles import writing_stage
 
 
 def export(
     pair_ids: list[int] = typer.Argument(None, help="Pair ids to export (default: every candidate of the method)."),
     out: Path = typer.Option(..., "--out", "-o", help="Folder; each PhotoShape goes into <pair>-<method_key>/."),
-    method: str = typer.Option(
-        "classifier", "--method", "-m",
-        help="classifier (each pair's newest classifier), fit (its re-ranking by rendering), builtin, "
-        "no-classifier, color-match, or an exact method key such as classifier:3 or fit:3.",
+    method: str | None = typer.Option(
+        None, "--method", "-m",
+        help="fit (materials chosen by rendering), classifier (each pair's newest classifier), builtin, "
+        "no-classifier, color-match, or an exact method key such as classifier:3 or fit:3. Default: the "
+        "collection's publish.method (its last run's).",
     ),
     formats: str = typer.Option(",".join(DEFAULT_FORMATS), "--format", "-f",
                                 help=f"Comma-separated: {', '.join(EXPORTERS)}."),
@@ -31,6 +40,7 @@ def export(
 ) -> None:
     """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""
     require_database()
+    method = method_or_published(method)
     from photoshape_flow.pipeline.downloads import export_candidates
 
     try:
@@ -40,7 +50,8 @@ def export(
     with cli_progress(console if not as_json else err_console) as progress:
         results = export_candidates(out, pair_ids or None, method, chosen, size=size, spp=spp, progress=progress)
     if not results:
-        fail(f"no candidates for method {method!r}: run inference first (photoshape run inference)")
+        fail(f"no candidates for method {method!r}: run the stage that writes them first "
+             f"(photoshape run {writing_stage(method)})")
     if as_json:
         console.print_json(json.dumps(results))
     else:

@@ -6,13 +6,16 @@ from pathlib import Path
 
 import typer
 
-from photoshape_flow.cli.common import console, fail, require_database
+from photoshape_flow.cli.common import console, fail, method_or_published, require_database
 from photoshape_flow.cli.progress import cli_progress
 
 
 def gallery(
     out: Path = typer.Argument(..., help="Folder to write the site into (index.html, pairs/, img/, downloads/)."),
-    method: str = typer.Option("classifier", "--method", "-m", help="Method or exact method key to show."),
+    method: str | None = typer.Option(
+        None, "--method", "-m",
+        help="Method or exact method key to show. Default: the collection's publish.method (its last run's).",
+    ),
     sheet: Path | None = typer.Option(None, "--sheet", help="Also write a contact-sheet PNG of the best candidates."),
     sheet_rows: int = typer.Option(6, "--sheet-rows", min=1, help="Candidates on the contact sheet."),
 ) -> None:
@@ -22,6 +25,7 @@ def gallery(
     with the command that renders it (photoshape run publish --pair N).
     """
     require_database()
+    method = method_or_published(method)
     from photoshape_flow.pipeline.gallery_site import write_contact_sheet, write_gallery_site
 
     with cli_progress(console) as progress:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from photoshape_flow.cli.common import console, fail, require_database
+from photoshape_flow.cli.common import console, fail, method_or_published, require_database
 from photoshape_flow.vocab import GRADES
 
 
@@ -13,9 +13,11 @@ def grade(
     label: str = typer.Argument(..., help=f"One of: {', '.join(GRADES)}."),
     note: str | None = typer.Option(None, "--note", "-n", help="Free-text remark shown in the gallery."),
     grader: str = typer.Option("user", "--grader", "-g", help="Who grades; one grade per grader and PhotoShape."),
-    method: str = typer.Option("classifier", "--method", "-m",
-                               help="Whose PhotoShape of the pair: a method (classifier: the newest classifier's) "
-                               "or an exact method key such as classifier:3."),
+    method: str | None = typer.Option(
+        None, "--method", "-m",
+        help="Whose PhotoShape of the pair: a method (fit, or classifier: the newest classifier's) or an exact "
+        "method key such as fit:3. Default: the collection's publish.method (its last run's).",
+    ),
 ) -> None:
     """Grade the pair's PhotoShape as it is now; re-grading it by the same grader replaces the earlier grade.
 
@@ -29,6 +31,7 @@ def grade(
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.grading import record_grade
 
+    method = method_or_published(method)
     if label not in GRADES:
         fail(f"unknown grade {label!r}; valid grades: {', '.join(GRADES)}")
     try:

@@ -18,7 +18,7 @@ from photoshape_flow.cli.common import (
     setup_logging,
 )
 from photoshape_flow.cli.progress import cli_progress
-from photoshape_flow.profiles import PROFILES
+from photoshape_flow.profiles import PROFILES, writing_stage
 
 BLOCKED_EXIT_CODE = 3  # another live worker holds items this run needed (see `photoshape status`)
 
@@ -125,12 +125,13 @@ def publish_pairs(resolved: Any, ctx: Any, pairs: Sequence[int]) -> StageReport:
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 
     wanted = sorted(set(pairs))
+    method = resolved.profile.publish.method
     with ctx.session() as session:
-        found = {pair_id for pair_id, _ in candidate_method_keys(session, resolved.profile.publish.method, wanted)}
+        found = {pair_id for pair_id, _ in candidate_method_keys(session, method, wanted)}
     for pair_id in wanted:
         if pair_id not in found:
             console.print(f"[yellow]pair {pair_id}: not a PhotoShape candidate (unknown, excluded, or no rank-1 "
-                          "assignments: run inference first)[/]", highlight=False)
+                          f"{method} assignments: run {writing_stage(method)} first)[/]", highlight=False)
     if not found:
         fail("no pair to publish")
     run_id = start_run(ctx, resolved, ["publish"], "cli")

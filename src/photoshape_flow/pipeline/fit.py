@@ -78,6 +78,9 @@ class FitSummary:
     pairs_done: int = 0
     pairs_skipped: int = 0
     pairs_failed: list[tuple[int, str]] = field(default_factory=list)
+    # pairs another live worker holds: reported as blocked, so `run all` stops (or `--wait`s) before
+    # publish, which would otherwise show those pairs without their fit rows and publish them again later
+    blocked: list[claims.Hold] = field(default_factory=list)
     rows: int = 0
     lightings: int = 0  # lighting estimates computed (not reused)
     changed: int = 0  # parts whose first material differs from the classifier's
@@ -229,7 +232,7 @@ def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candida
         if index not in candidates:
             for row in rows:
                 out.append(m.Assignment(**common, rank=row.rank, material_id=row.material_id, score=row.score,
-                                        substance=row.substance, unobserved=row.unobserved,
+                                        posterior=row.posterior, substance=row.substance, unobserved=row.unobserved,
                                         params={**(row.params or {}), "fit": {"source": "ranking-only"}}))
             continue
         ranked = rank_candidates(candidates[index], measured.get(index, {}), ctx.prior_weight)
@@ -237,6 +240,7 @@ def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candida
             c = item.candidate
             out.append(m.Assignment(
                 **common, rank=rank, material_id=c.material_id, score=score, substance=c.substance, unobserved=False,
+                posterior=score if ctx.calibration is not None else None,  # calibrated only with fitted weights
                 params={"uv": IDENTITY_UV, "part_substance": (base.params or {}).get("part_substance"),
                         "fit": {"source": c.source, "prior": round(c.prior, 6), "cost": round(item.cost, 6),
                                 "distance": None if item.distance is None else round(item.distance, 6),
@@ -303,10 +307,14 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
                 summary.lightings += int(computed)
                 refine = bool(candidates) and is_refined(session, ctx, pair)
                 digest = pair_hash(ctx, data, candidates, str(light["key"]), refine)
-                if rows_hash(session, pair_id, ctx.method_key) == digest or not claims.claim(
-                        session, stage, [str(pair_id)], params_hash=digest,
-                        lease_seconds=settings.claim_lease_seconds, retry_failed=True):
+                if rows_hash(session, pair_id, ctx.method_key) == digest:
                     summary.pairs_skipped += 1
+                    continue
+                if not claims.claim(session, stage, [str(pair_id)], params_hash=digest,
+                                    lease_seconds=settings.claim_lease_seconds, retry_failed=True):
+                    held = claims.live_holds(session, stage, [str(pair_id)])
+                    summary.blocked += held
+                    summary.pairs_skipped += int(not held)
                     continue
             with session_scope(url) as session:
                 with summary.timed("selection"):

@@ -26,10 +26,11 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 METHOD = "fit"
-CODE_VERSION = "fit-6"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
+CODE_VERSION = "fit-7"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
 #                         fit-4: renders blended with the photo's background at the silhouette (D41);
 #                         fit-5: each candidate judged at its own best exposure (D42);
-#                         fit-6: weights calibrated on photos degraded at the exemplars' size (D45)
+#                         fit-6: weights calibrated on photos degraded at the exemplars' size (D45);
+#                         fit-7: rows carry the calibrated score as their posterior (the gallery's confidence)
 
 
 def weights_of(cfg: FitConfig) -> Weights:

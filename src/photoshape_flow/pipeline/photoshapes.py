@@ -29,11 +29,12 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
 from photoshape_flow.export.assignment import PartAssignment, Provenance, assignment_document
+from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 CODE_VERSION = "publish-v1"  # part of every PhotoShape's fingerprint: bump it to redo renders and exports
-DEFAULT_METHOD = "classifier"
+DEFAULT_METHOD = DEFAULT_PUBLISH_METHOD  # what a caller that names no method is shown
 # elevation (rad), distance, horizontal fov (deg): the unit cube's bounding sphere (r = 0.87) fits the frame
 TURNTABLE_CAMERA = (math.radians(20.0), 2.6, 40.0)
 FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders

@@ -58,6 +58,7 @@ from photoshape_flow.pipeline.photoshapes import (
     render_key,
     render_seed,
 )
+from photoshape_flow.profiles import writing_stage
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
@@ -72,6 +73,7 @@ EXPORT_VERSION = 2
 class PublishSummary:
     method: str
     candidates: int = 0
+    without_assignments: int = 0  # asked-for pairs with no rank-1 rows of `method` yet (its stage has not run)
     rendered: int = 0
     skipped: int = 0
     failed: int = 0
@@ -124,6 +126,12 @@ def run_publish(
         envmap_id = envmap_row.id if envmap_row is not None else None
         summary.envmap = envmap_row.name if envmap_row is not None else None
     summary.candidates = len(todo)
+    if pair_ids is not None:
+        summary.without_assignments = len(set(pair_ids) - {pair_id for pair_id, _ in todo})
+    if summary.without_assignments:
+        log.warning("publish: %d pair(s) have no rank-1 %s assignments yet; they publish once `photoshape run %s` "
+                    "has written them", summary.without_assignments, summary.method,
+                    writing_stage(summary.method))
     if envmap_row is None:
         log.warning("publish: no enabled envmap; rendering under a constant white sky")
 

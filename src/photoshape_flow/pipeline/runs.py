@@ -13,7 +13,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
-from photoshape_flow.profiles import ResolvedProfile, resolve_profile
+from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, ResolvedProfile, resolve_profile
 
 
 def last_run(session: Session) -> m.PipelineRun | None:
@@ -29,6 +29,16 @@ def last_run_profile(session: Session) -> ResolvedProfile | None:
     """The profile of the newest recorded run, with its overrides (None before the first run)."""
     row = last_run(session)
     return None if row is None else run_profile(row)
+
+
+def published_method(session: Session) -> str:
+    """The method the collection publishes with: its last run's `publish.method` (the default before any run).
+
+    The gallery, export and grade commands show this when no `--method` is given, so they show what
+    `photoshape run publish` rendered, also for a collection built with `--set publish.method=classifier`.
+    """
+    resolved = last_run_profile(session)
+    return DEFAULT_PUBLISH_METHOD if resolved is None else resolved.profile.publish.method
 
 
 def effective_profile(session: Session, name: str | None, overrides: Sequence[str] = ()) -> tuple[str, list[str]]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.stages.context import StageContext
-from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.report import StageReport, blocked_by
 from photoshape_flow.stages.work import WorkUnit
 
 NAME = "fit"
@@ -33,6 +33,7 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
                       renderer=ctx.renderer, progress=ctx.progress)
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
+        blocked=blocked_by(summary.blocked),
         details={summary.method_key or "fit": {"pairs": summary.pairs_done, "rows": summary.rows,
                                                "parts_changed": summary.changed, "parts_refined": summary.refined,
                                                "lightings": summary.lightings, "weights": summary.weights,
