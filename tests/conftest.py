@@ -10,6 +10,7 @@ import tempfile
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -175,6 +176,27 @@ def tiny_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("tiny-demo")
     generate_demo(root, "tiny", seed=3)
     return root
+
+
+@pytest.fixture(scope="session")
+def reference(tiny_demo: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    """One uninterrupted `photoshape run all --profile tiny` on SQLite, as a user starts it (its data root
+    and `snapshot`): what every resumed or concurrent run reproduces, and the built collection that the
+    service tests copy (`copied_collection`) instead of building their own."""
+    from tests.pipeline.whole_runs import run_all, snapshot
+
+    root = data_root_with_inbox(tmp_path_factory.mktemp("kill-reference") / "data", tiny_demo)
+    done = run_all(root, None)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    return root, snapshot(f"sqlite:///{root / 'photoshape.db'}")
+
+
+def copied_collection(reference_root: Path, data_root: Path) -> Path:
+    """A private copy of the reference run's data root (SQLite database, blobs, gallery; the inbox's links
+    kept): a built tiny collection a test may change. Run commands on it with `PHOTOSHAPE_SEED=3`, the
+    reference's seed (tests/pipeline/whole_runs.run_env), or every seeded hash differs."""
+    shutil.copytree(reference_root, data_root, symlinks=True)
+    return data_root
 
 
 def data_root_with_inbox(data_root: Path, demo: Path) -> Path:

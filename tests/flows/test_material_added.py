@@ -1,24 +1,25 @@
 """The material-added chain as a user meets it: a real Prefect server, `photoshape serve`, a material
 ingested with the CLI, the automation's run (fit first, no retraining), and the gallery afterwards.
 
-The collection is built with `publish.method=fit` as a recorded override (the profile the re-run
-inherits), so what the re-run fits is what the gallery shows without waiting for a retrain."""
+The collection is the reference `photoshape run all --profile tiny` (tests/conftest.py), copied: its
+publish method is the default, fit (D46), which the re-run inherits, so what the re-run fits is what
+the gallery shows without waiting for a retrain."""
 
 from __future__ import annotations
 
 import asyncio
-import os
 import re
 import subprocess
 import sys
 import time
 import warnings
 from pathlib import Path
+from typing import Any
 
 import pytest
 import sqlalchemy as sa
 import yaml
-from tests.conftest import data_root_with_inbox
+from tests.conftest import copied_collection
 
 pytestmark = [pytest.mark.prefect, pytest.mark.slow, pytest.mark.render]
 
@@ -123,18 +124,13 @@ def _quick_trigger(tmp_path: Path) -> Path:
 
 
 def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str], tiny_demo: Path,
-                                                  tmp_path: Path) -> None:
+                                                  reference: tuple[Path, Any], tmp_path: Path) -> None:
     from tests.flows.test_pipeline_flow import recoloured_materials
+    from tests.pipeline.whole_runs import run_env
 
-    data_root = data_root_with_inbox(tmp_path / "data", tiny_demo)
+    data_root = copied_collection(reference[0], tmp_path / "data")  # built by `run all --profile tiny`
     # a crash of the flow's process (SIGSEGV seen twice in CI, 2026-11-25) leaves its Python stack in serve.log
-    env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1",
-           "PYTHONFAULTHANDLER": "1"}
-    env.pop("PHOTOSHAPE_DATABASE_URL", None)
-    subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=env, check=True, capture_output=True)
-    built = subprocess.run([PHOTOSHAPE, "run", "all", "--profile", "tiny", "--set", "publish.method=fit"], env=env,
-                           capture_output=True, text=True)
-    assert built.returncode == 0, built.stdout[-3000:] + built.stderr[-3000:]
+    env = {**run_env(data_root, None), **prefect_server, "DO_NOT_TRACK": "1", "PYTHONFAULTHANDLER": "1"}
 
     serve = subprocess.Popen([PHOTOSHAPE, "serve", "--declarations", str(_quick_trigger(tmp_path))], env=env,
                              stdout=open(tmp_path / "serve.log", "w"), stderr=subprocess.STDOUT)
@@ -203,7 +199,7 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
         keys = assignment_set_keys(session, [(pair_id, method_key) for pair_id, _ in published])
     # the run used the profile the collection was built with, not a fixed preset, fitted and published
     assert (run.profile_name, run.status) == ("tiny", "ok"), run.error
-    assert run.overrides["publish.method"] == "fit"
+    assert run.profile["publish"]["method"] == "fit"  # the default (D46), recorded with the run
     assert run.stages == ["fit", "publish"] and fit_reports  # no retraining stage ran
     changes = fit_reports[-1]["details"]["changes"]
     assert changes["grown"] > 0 and changes["won_by_new"] <= changes["parts"], changes

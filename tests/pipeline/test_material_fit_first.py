@@ -6,7 +6,7 @@ material that most in-collection parts truly wear (fabric_blue_twill when writte
 blue material) is removed before the first fit, so that fit cannot choose it. Then it is
 ingested again for real, and the material-added re-run (`photoshape new-materials`, run as a user runs it) must
 re-fit the affected pairs only, let the new material win parts it truly covers, publish them with
-`publish.method=fit`, and report counts that match the rows.
+fit (publish's default method, D46), and report counts that match the rows.
 """
 
 from __future__ import annotations
@@ -91,15 +91,15 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
     from photoshape_flow.stages import StageContext, run_all
 
     truth_of, held_out = _plant(tiny_demo, db_url, store)
-    # the collection's last run: fit, with publish.method=fit recorded (the re-run inherits both)
-    (fitted,) = run_all(resolve_profile("tiny", ["publish.method=fit"]), StageContext.create(), names=["fit"])
+    # the collection's last run: fit, at the tiny profile (the re-run inherits it, publish.method=fit included)
+    (fitted,) = run_all(resolve_profile("tiny"), StageContext.create(), names=["fit"])
     assert fitted.done == len({p for p, _ in truth_of})
     before = _first_fit(db_url)
     (new_id,) = ingest_materials([held_out], source="demo-tiny", previews=False).added
     with session_scope(db_url) as session:
         new_name = session.get(m.Material, new_id).name
         classifiers = session.execute(sa.select(sa.func.count()).select_from(m.Classifier)).scalar_one()
-        rerun = plan_material_rerun(session, "tiny", ["publish.method=fit"], renders_per_material=6)
+        rerun = plan_material_rerun(session, "tiny", [], renders_per_material=6)
     assert rerun.new_ids == [new_id] and rerun.stages == ["fit", "publish"]
     assert set(rerun.pairs) == {p for p, _ in truth_of}  # every planted pair has an observed part
 
@@ -126,11 +126,11 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
     assert changes == {"parts": len(after), "grown": observed,  # it joined every observed part's candidates
                        "changed": sum(after[key] != before.get(key) for key in after), "won_by_new": len(won)}
     assert changes["changed"] >= len(won)
-    assert (run.profile_name, run.overrides["publish.method"], run.status) == ("tiny", "fit", "ok")
+    assert (run.profile_name, run.profile["publish"]["method"], run.status) == ("tiny", "fit", "ok")
     assert run.stages == ["fit", "publish"] and run.reports["fit"]["done"] == len(rerun.pairs)
     row = re.search(r"parts changed \(fit:\d+\)\s*\n(?:.*\n){3}\W*(\d+)\W+(\d+)\W+(\d+)\W+(\d+)", result.output)
     assert row and [int(x) for x in row.groups()] == list(changes.values()), result.output
-    # publish.method=fit: the pairs whose parts the new material won are published with fit's rows
+    # publish's default method, fit: the pairs whose parts the new material won are published with fit's rows
     assert {p for p, _ in won} <= set(published)
     for pair_id, params in published.items():
         assert params["assignment_set"] == keys[(pair_id, fit_key)]
