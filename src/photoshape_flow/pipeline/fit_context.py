@@ -100,7 +100,7 @@ class FitContext:
         if material_id is None or material_id not in self.material_rows:
             return None
         if material_id not in self._specs:
-            from photoshape_flow.pipeline.training_renders import material_spec
+            from photoshape_flow.pipeline.render_inputs import material_spec
 
             self._specs[material_id] = material_spec(self.material_rows[material_id], self.store)
         return self._specs[material_id]

@@ -173,8 +173,8 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
                     envmap: m.Envmap | None = None) -> PhotoShape:
     """Read a candidate's rows and blobs into render/export inputs; a one-line error when incomplete."""
     from photoshape_flow.geometry.mesh import ShapeMesh
-    from photoshape_flow.pipeline.training_renders import material_spec
-    from photoshape_flow.render import Camera, EnvmapSpec, Refinement
+    from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
+    from photoshape_flow.render import Camera, Refinement
 
     pair = session.get(m.Pair, pair_id)
     if pair is None:
@@ -228,7 +228,7 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
             **({"refinement": refinement} if refinement is not None else {}),
         })
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    envmap_spec = EnvmapSpec(path=store.resolve(envmap.blob)) if envmap is not None else None
+    lighting = envmap_spec(envmap, store) if envmap is not None else None
     document = assignment_document(
         pair_id=pair_id, method_key=method_key,
         shape=provenance("shape", shape), exemplar=provenance("exemplar", exemplar), parts=assigned,
@@ -244,7 +244,7 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
     return PhotoShape(
         pair_id=pair_id, method_key=method_key, shape_id=shape.id, exemplar_id=exemplar.id,
         classifier_id=classifier_id, mesh=mesh, materials=materials, uv_transforms=jitters, camera=camera,
-        document=document, fingerprint=fingerprint, envmap=envmap_spec,
+        document=document, fingerprint=fingerprint, envmap=lighting,
         envmap_id=envmap.id if envmap is not None else None, exemplar_blob=exemplar.image_blob,
         material_rows=material_rows, unrefined=unrefined if unrefined != materials else None,
     )

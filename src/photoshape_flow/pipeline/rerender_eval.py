@@ -37,7 +37,7 @@ class MaterialSpecs:
 
     def get(self, session: Session, material_id: int, refinement: Mapping[str, Any] | None = None) -> Any:
         if material_id not in self._specs:
-            from photoshape_flow.pipeline.training_renders import material_spec
+            from photoshape_flow.pipeline.render_inputs import material_spec
 
             self._specs[material_id] = material_spec(session.get(m.Material, material_id), self.store)
         spec = self._specs[material_id]

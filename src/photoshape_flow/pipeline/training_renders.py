@@ -36,7 +36,6 @@ import time
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Literal
 
 import sqlalchemy as sa
@@ -45,6 +44,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
 from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
@@ -273,20 +273,7 @@ class RenderInputs:
         return {p.material_id: material_spec(self.materials[p.material_id], self.store) for p in spec.parts}
 
     def envmap_spec(self, envmap_id: int) -> Any:
-        from photoshape_flow.render import EnvmapSpec
-
-        return EnvmapSpec(path=self.store.resolve(self.envmaps[envmap_id].blob))
-
-
-def material_spec(row: m.Material, store: BlobStore) -> Any:
-    """A render `MaterialSpec` from a Material row (maps resolved to blob paths)."""
-    from photoshape_flow.render import MaterialSpec
-    from photoshape_flow.render.specs import CHANNELS
-
-    maps: dict[str, Path] = {ch: store.resolve(ref) for ch, ref in (row.maps or {}).items() if ch in CHANNELS and ref}
-    return MaterialSpec(
-        name=row.name, substance=row.substance, maps=maps, params=dict(row.params or {}), scale=row.default_scale
-    )
+        return envmap_spec(self.envmaps[envmap_id], self.store)
 
 
 def _existing(session: sa.orm.Session, kind: str, keys: Sequence[str]) -> dict[str, tuple[str, str]]:
