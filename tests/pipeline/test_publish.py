@@ -226,13 +226,15 @@ def test_commands_default_to_the_collections_publish_method(db_url, store, tmp_p
 
     from photoshape_flow.cli import app
     from photoshape_flow.pipeline.runs import published_method
+    from photoshape_flow.profiles import resolve_profile
 
     seed(db_url, store, tmp_path)  # fit rows only
     runner = CliRunner()
     with session_scope(db_url) as s:
         assert published_method(s) == "fit"  # before any run: the default
-        s.add(m.PipelineRun(origin="cli", profile_name="tiny", overrides={"publish.method": "classifier"},
-                            stages=["publish"], status="ok"))
+        record = resolve_profile("tiny", ["publish.method=classifier"]).record()  # as every run records it
+        s.add(m.PipelineRun(origin="cli", profile_name="tiny", overrides=record["overrides"],
+                            profile=record["profile"], stages=["publish"], status="ok"))
     with session_scope(db_url) as s:
         assert published_method(s) == "classifier"
     result = runner.invoke(app, ["export", "--out", str(tmp_path / "out"), "--format", "glb"])

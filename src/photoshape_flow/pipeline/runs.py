@@ -37,8 +37,9 @@ def published_method(session: Session) -> str:
     The gallery, export and grade commands show this when no `--method` is given, so they show what
     `photoshape run publish` rendered, also for a collection built with `--set publish.method=classifier`.
     """
-    resolved = last_run_profile(session)
-    return DEFAULT_PUBLISH_METHOD if resolved is None else resolved.profile.publish.method
+    row = last_run(session)  # its recorded, resolved profile: no re-resolution that a renamed profile could fail
+    recorded = ((row.profile if row is not None else None) or {}).get("publish") or {}
+    return str(recorded.get("method") or DEFAULT_PUBLISH_METHOD)
 
 
 def effective_profile(session: Session, name: str | None, overrides: Sequence[str] = ()) -> tuple[str, list[str]]:
