@@ -100,6 +100,9 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
         low = min(f["cost"] for f in fit)
         expected = np.exp(-(np.array([f["cost"] for f in fit]) - low) / t)
         assert np.allclose([r.score for r in ranked], expected / expected.sum(), atol=1e-3)
+        assert [r.posterior for r in ranked] == [r.score for r in ranked]  # calibrated: the gallery's confidence
+    hand_observed = [ranked for ranked in hand_rows.values() if ranked[0].params["fit"].get("cost") is not None]
+    assert hand_observed and all(r.posterior is None for ranked in hand_observed for r in ranked)  # uncalibrated
 
     again = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=3"]), ctx)
     assert again.done == 0  # the stored calibration is reused (same key), nothing re-fits or re-ranks

@@ -19,7 +19,6 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
 from photoshape_flow.pipeline.photoshapes import (
-    DEFAULT_METHOD,
     EXEMPLAR_VIEW,
     candidate_method_keys,
     choose_envmap,
@@ -27,6 +26,7 @@ from photoshape_flow.pipeline.photoshapes import (
     load_photoshape,
     render_key,
 )
+from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
@@ -101,7 +101,7 @@ def export_candidates(
     missing = sorted(set(pair_ids or ()) - {p for p, _ in todo})
     results: list[dict[str, Any]] = [
         {"pair_id": p, "method_key": None, "status": STATUS_FAILED, "error": f"pair {p}: not a candidate for "
-         f"{method or DEFAULT_METHOD} (no rank-1 assignments, or excluded)", "files": {}} for p in missing
+         f"{method or DEFAULT_PUBLISH_METHOD} (no rank-1 assignments, or excluded)", "files": {}} for p in missing
     ]
     for pair_id, method_key in counted(progress, "export pairs", todo):
         result: dict[str, Any] = {"pair_id": pair_id, "method_key": method_key, "files": {}}

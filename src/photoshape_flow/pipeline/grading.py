@@ -14,7 +14,8 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
-from photoshape_flow.pipeline.photoshapes import DEFAULT_METHOD, assignment_set_keys, candidate_method_keys
+from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
+from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
 
 
 def graded_photoshape(session: Session, pair_id: int, method: str | None = None) -> tuple[str, str]:
@@ -27,7 +28,7 @@ def graded_photoshape(session: Session, pair_id: int, method: str | None = None)
         raise ValueError(f"pair {pair_id}: no such pair")
     found = candidate_method_keys(session, method, [pair_id])
     if not found:
-        raise ValueError(f"pair {pair_id}: no PhotoShape for method {method or DEFAULT_METHOD!r} "
+        raise ValueError(f"pair {pair_id}: no PhotoShape for method {method or DEFAULT_PUBLISH_METHOD!r} "
                          "(no rank-1 assignments, or excluded)")
     method_key = found[0][1]
     return method_key, assignment_set_keys(session, [(pair_id, method_key)])[(pair_id, method_key)]

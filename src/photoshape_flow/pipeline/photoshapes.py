@@ -34,7 +34,6 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 CODE_VERSION = "publish-v1"  # part of every PhotoShape's fingerprint: bump it to redo renders and exports
-DEFAULT_METHOD = DEFAULT_PUBLISH_METHOD  # what a caller that names no method is shown
 # elevation (rad), distance, horizontal fov (deg): the unit cube's bounding sphere (r = 0.87) fits the frame
 TURNTABLE_CAMERA = (math.radians(20.0), 2.6, 40.0)
 FRAME_MARGIN = 0.08  # fraction of the frame left around the shape in PhotoShape renders
@@ -59,7 +58,7 @@ def candidate_method_keys(session: Session, method: str | None, pair_ids: Sequen
     `method` is a method name (``classifier`` takes each pair's newest classifier) or an exact
     method key (``classifier:3``, ``builtin``).
     """
-    method = method or DEFAULT_METHOD
+    method = method or DEFAULT_PUBLISH_METHOD
     query = (
         sa.select(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.method,
                   sa.func.max(m.Assignment.classifier_id))

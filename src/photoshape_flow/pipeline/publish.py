@@ -46,7 +46,6 @@ from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.photoshapes import (
-    DEFAULT_METHOD,
     UNREFINED_VIEW,
     PhotoShape,
     assignment_set_keys,
@@ -58,7 +57,7 @@ from photoshape_flow.pipeline.photoshapes import (
     render_key,
     render_seed,
 )
-from photoshape_flow.profiles import writing_stage
+from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, writing_stage
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
@@ -118,7 +117,7 @@ def run_publish(
     formats = parse_formats(list(formats))
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
-    summary = PublishSummary(method=method or DEFAULT_METHOD)
+    summary = PublishSummary(method=method or DEFAULT_PUBLISH_METHOD)
     with session_scope(url) as session:
         todo = candidate_method_keys(session, method, pair_ids)
         shown = assignment_set_keys(session, todo)
