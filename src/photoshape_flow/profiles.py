@@ -27,7 +27,7 @@ from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.substance_configs import PRESETS as SUBSTANCE_PRESETS
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS
-from photoshape_flow.vocab import ASSIGNMENT_METHODS
+from photoshape_flow.vocab import ASSIGNMENT_METHODS, LIGHTING_LOSSES
 
 
 class ProfileError(ValueError):
@@ -109,6 +109,9 @@ class FitConfig:
     rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
     lighting_envmaps: int = 4  # more training envmaps than this: screen all at 2 azimuths, search the best 4
     lighting_rounds: int = 1  # 2+: then select, and light the winners again (worse on validation renders: D42)
+    lighting_loss: str = "appearance"  # what picks the lighting: the first materials' "appearance", "shading"
+    #                                    (where light and shadow fall in each part, albedo removed) or
+    #                                    "shading-rotation" (rotation by shading, envmap by appearance); D49
     erode: int = 1  # pixels shrunk off each part mask before comparing
     blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
     exposure_stops: float = 2.0  # each candidate judged at its best exposure this far either side of the
@@ -131,6 +134,11 @@ class FitConfig:
     calibration_blurs: tuple[float, ...] = (0.0, 1.0)  # compared on the same renders (empty: `blur` only)
     calibration_at_exemplar_size: bool = True  # degrade the calibration's photos at the median stored
     #                                           exemplar's side, not the render's (D45)
+
+    def __post_init__(self) -> None:
+        if self.lighting_loss not in LIGHTING_LOSSES:
+            raise ProfileError(f"fit.lighting_loss: unknown loss {self.lighting_loss!r}; "
+                               f"choose from {', '.join(LIGHTING_LOSSES)}")
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)

@@ -43,3 +43,6 @@ STATUS_OK = "ok"
 STATUS_FAILED = "failed"
 STATUS_REJECTED = "rejected"
 STATUS_PENDING = "pending"
+
+# what picks fit's lighting per exemplar (`fit.scene.score_lighting`, `FitConfig.lighting_loss`)
+LIGHTING_LOSSES: tuple[str, ...] = ("appearance", "shading", "shading-rotation")

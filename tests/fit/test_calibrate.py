@@ -56,3 +56,25 @@ def test_few_cases_stay_near_the_centre_many_cases_leave_it() -> None:
     many = fit(_cases(theta, 2000, seed=3), centre=centre, start=centre, l2=50.0).theta
     assert np.linalg.norm(few - centre) < np.linalg.norm(many - centre)
     assert np.linalg.norm(many - theta) < np.linalg.norm(centre - theta)
+
+
+def test_the_calibration_keeps_the_model_with_the_lowest_held_out_loss() -> None:
+    """Cases drawn from the hand-set weights themselves: with few of them the held-out figures keep the
+    hand-set weights (fitting five numbers only adds noise); with many drawn from other weights, the fit (D48)."""
+    from photoshape_flow.pipeline.fit_calibration import MODELS, choices, held_out, refit
+    from photoshape_flow.profiles import FitConfig
+
+    cfg = FitConfig()
+    base = np.array([cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight,
+                     cfg.prior_weight])
+    for cases, want in ((_cases(base, 40, seed=4), {"hand_set", "hand_set_temperature"}),
+                        (_cases(np.array([0.2, 2.0, 0.0, 1.0, 0.1]), 1500, seed=5), {"fitted"})):
+        ranked = sorted(choices(held_out(cases, cfg), cases, base))
+        assert [m for _, m in sorted(ranked, key=lambda r: r[1])] == sorted(MODELS)
+        assert ranked[0][1] in want, ranked
+    kept = refit("hand_set", cases, base)
+    assert np.allclose(kept.theta, base) and np.allclose(refit("fitted", cases, base).theta,
+                                                         fit(cases, start=base, centre=base).theta)
+    scaled = refit("hand_set_temperature", cases, base)
+    assert np.allclose(np.asarray(scaled.weights), base / base.sum())
+    assert scaled.temperature == pytest.approx(fit_temperature(cases, base) / base.sum())

@@ -132,6 +132,29 @@ def test_lighting_estimate_recovers_the_rotation_also_after_screening(scene) -> 
     assert (best.envmap_id, best.rotation, renders) == (TRUE_ENVMAP, 0.0, 3 * 2 + 2)
 
 
+@pytest.mark.parametrize("first", [(6, 6), (4, 3)], ids=["off-white fabric on both", "wood and metal"])
+def test_the_shading_loss_lights_the_photo_even_from_wrong_first_materials(scene, first) -> None:  # type: ignore[no-untyped-def]
+    """The ranking's first materials are wrong: the shading loss still finds the photo's studio (the
+    appearance loss, free to recolour them with a studio's tint, picks another: D49)."""
+    frame, fit_scene = _fit_scene(scene)
+    wrong = [_spec(first[p.index - 1]) for p in fit_scene.mesh.parts]
+    best, _, _, _ = estimate_lighting(frame, fit_scene, wrong, _rotatable(scene[3]), 1, Weights(), loss="shading")
+    assert best.envmap_id == TRUE_ENVMAP
+
+
+def test_the_shading_loss_ignores_albedo_and_exposure_but_not_where_the_light_falls() -> None:
+    """Per-part, per-channel gains (an albedo, an exposure, a white balance) cost nothing; a shading
+    gradient running the other way does."""
+    ramp = np.linspace(0.2, 1.0, 24, dtype=np.float32)[None, :, None] * np.ones((24, 24, 3), np.float32)
+    left, right = np.zeros((24, 24), bool), np.zeros((24, 24), bool)
+    left[:, :12], right[:, 12:] = True, True
+    gains = np.where(left[..., None], [0.3, 0.5, 0.9], [1.7, 1.1, 0.4]).astype(np.float32)
+    regions = {1: (left, left), 2: (right, right)}
+    assert lt.shading_loss(ramp, ramp * gains, regions, 2.0) == pytest.approx(0.0, abs=1e-9)
+    assert lt.shading_loss(ramp[:, ::-1], ramp * gains, regions, 2.0) > 0.05
+    assert lt.shading_loss(ramp, ramp, {1: (left, right)}, 2.0) == float("inf")  # no pixel in both regions
+
+
 def test_a_render_is_blended_with_the_photos_background_at_its_silhouette() -> None:
     """A thin part whose edge pixels the camera blended with a grey backdrop: the render (un-premultiplied,
     with coverage) shows the same edge once `exposed_lab` blends it with the photo's measured background."""

@@ -51,7 +51,7 @@ def _fit_rows(url: str) -> dict[tuple[int, int], list[m.Assignment]]:
 def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str, store: BlobStore) -> None:
     from tests.pipeline.test_fit import _plant_pairs
 
-    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY
+    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY, MODELS
     from photoshape_flow.pipeline.training_renders import run_training_renders
     from photoshape_flow.profiles import resolve_profile
     from photoshape_flow.stages import StageContext
@@ -84,6 +84,16 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
     assert record["blur"] in (0.0, 1.0) and report["blur"] == record["blur"]  # the chosen blur is the stage's
     assert set(record["by_blur"]) <= {"0.0", "1.0"} and str(record["blur"]) in record["by_blur"]
     assert all(w >= 0 for w in record["weights"].values())
+    # the kept model (all weights fitted, or the hand-set ones with or without a fitted temperature) has the lowest
+    # held-out log-loss of the chosen blur (D48); hand-set weights keep their proportions
+    assert record["model"] in MODELS and report["model"] == record["model"]
+    held = record["held_out"]
+    if held.get("cases"):
+        assert held[record["model"]]["log_loss"] == min(held[model]["log_loss"] for model in MODELS)
+    if record["model"] != "fitted":
+        hand_set = resolve_profile("tiny").fit
+        assert record["weights"]["prior"] / record["weights"]["color"] == pytest.approx(
+            hand_set.prior_weight / hand_set.color_weight, rel=1e-3)
 
     rows = _fit_rows(db_url)
     assert fitted.done == len({pair for pair, _ in rows})  # the weights' hash re-ran every pair

@@ -3,7 +3,8 @@
 A hypothesis is one training envmap at one rotation about +y; the exposure is solved in closed form
 for each (least squares in linear RGB between the rendered and the photo's per-part mean colours,
 weighted by pixels: per-part means, not pixels, because the render and the photo are only aligned
-up to a few pixels). The hypothesis with the lowest appearance loss wins.
+up to a few pixels). The hypothesis with the lowest loss wins: the appearance loss of the ranking's
+first materials, or (`shading_loss`) the layout of the shading alone, which no albedo can mimic.
 """
 
 from __future__ import annotations
@@ -11,11 +12,15 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from photoshape_flow.render.specs import linear_to_srgb, srgb_to_linear
 
 EXPOSURE_RANGE = (1.0 / 32.0, 32.0)
+SHADING_FLOOR = 1e-3  # linear radiance below which log-shading is clamped (black is not infinitely dark)
+SHADING_SIGMA = 1.0 / 48.0  # of the frame's side: the blur that makes layouts comparable under misalignment
+MIN_SHARED = 12  # pixels a part needs in both the render's and the photo's region to count
 
 
 @dataclass(frozen=True)
@@ -67,3 +72,39 @@ def best(losses: Sequence[tuple[Hypothesis, float, float]]) -> tuple[Hypothesis,
     if not finite:
         raise ValueError("no lighting hypothesis could be scored (no part visible in both images)")
     return min(finite, key=lambda item: item[2])
+
+
+def log_shading(linear: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
+    """log linear RGB inside `mask`, blurred by `sigma` pixels without reaching outside it (a normalised
+    convolution: a neighbouring part of another albedo, or the background, does not bleed in)."""
+    rgb = np.asarray(linear, np.float32)[..., :3]
+    if sigma > 0:
+        weight = np.asarray(mask, np.float32)
+        inside = cv2.GaussianBlur(rgb * weight[..., None], (0, 0), sigmaX=float(sigma))
+        rgb = inside / np.maximum(cv2.GaussianBlur(weight, (0, 0), sigmaX=float(sigma)), 1e-6)[..., None]
+    return np.log(np.maximum(rgb, SHADING_FLOOR))
+
+
+def shading_loss(rendered: np.ndarray, photo: np.ndarray, regions: Mapping[int, tuple[np.ndarray, np.ndarray]],
+                 sigma: float) -> float:
+    """Pixel-weighted mean, over parts, of the variance of log(render / photo) inside the part, per channel.
+
+    `rendered` and `photo` are linear RGB; `regions` part -> (render mask, photo mask), each side blurred
+    inside its own mask (`log_shading`) and compared where both hold. Removing each part's mean log-ratio
+    per channel removes its albedo (and the exposure and any white balance), so what is left is where
+    the light and the shadows fall on the part, and the colour of the key light against the fill's: a
+    hypothesis cannot win by tinting a wrong first material toward the photo's colour, which the
+    appearance loss allows (D39, D49).
+    """
+    total = 0.0
+    count = 0
+    for render_mask, photo_mask in regions.values():
+        both = np.asarray(render_mask, bool) & np.asarray(photo_mask, bool)
+        n = int(both.sum())
+        if n < MIN_SHARED:
+            continue
+        ratio = (log_shading(rendered, render_mask, sigma)[both].astype(np.float64)
+                 - log_shading(photo, photo_mask, sigma)[both])
+        total += float(((ratio - ratio.mean(axis=0)) ** 2).sum()) / ratio.shape[1]
+        count += n
+    return total / count if count else float("inf")

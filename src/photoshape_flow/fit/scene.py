@@ -23,6 +23,7 @@ from photoshape_flow.fit.appearance import Appearance, Weights, appearance, erod
 from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.select import render_slots
 from photoshape_flow.imaging.squares import crop_square, square_box
+from photoshape_flow.vocab import LIGHTING_LOSSES
 
 MIN_BACKGROUND = 12  # background pixels needed to measure the photo's background colour
 OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
@@ -135,6 +136,13 @@ class FitScene:
         """A render of the scene's shape in the frame: (size, size, 4) un-premultiplied linear RGB and coverage."""
         return frame.render_rgba(self.mesh, materials, self.camera, envmap)
 
+    def exposed_linear(self, rgba: np.ndarray, exposure: float | np.ndarray) -> np.ndarray:
+        """A render (`render`) at `exposure` over the photo's background at the silhouette, softened like
+        the photo: linear RGB, what `exposed_lab` converts."""
+        alpha = rgba[..., 3:4]
+        gain = np.asarray(exposure, np.float32)  # a factor, or per-channel factors (a white balance)
+        return soften(rgba[..., :3] * (alpha * gain) + (1.0 - alpha) * self.background, self.blur)
+
     def exposed_lab(self, rgba: np.ndarray, exposure: float | np.ndarray) -> np.ndarray:
         """CIELAB of a render (`render`) as the photo would show it: at `exposure`, over the photo's
         background at the silhouette, softened like the photo.
@@ -143,10 +151,7 @@ class FitScene:
         background (coverage, lens, resize), so the render's are blended with the same colour, or a
         thin part (a leg, a frame bar) would be compared in two different mixtures.
         """
-        alpha = rgba[..., 3:4]
-        gain = np.asarray(exposure, np.float32)  # a factor, or per-channel factors (a white balance)
-        linear = rgba[..., :3] * (alpha * gain) + (1.0 - alpha) * self.background
-        return to_lab(lt.exposed_srgb(soften(linear, self.blur), 1.0))
+        return to_lab(lt.exposed_srgb(self.exposed_linear(rgba, exposure), 1.0))
 
     @cached_property
     def photo_stats(self) -> dict[int, Appearance]:
@@ -173,57 +178,105 @@ def region_distances(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appea
 
 def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
                    hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights,
-                   erode_pixels: int = 1) -> list[tuple[lt.Hypothesis, float, float]]:
+                   erode_pixels: int = 1, loss: str = "appearance") -> list[tuple[lt.Hypothesis, float, float]]:
     """(hypothesis, exposure, loss) of each (hypothesis, envmap spec): how well it explains the photo.
 
     Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
-    closed-form fit of the per-part mean colours; its loss the pixel-weighted mean part distance.
+    closed-form fit of the per-part mean colours. Its loss (`lighting_losses`): "appearance", the
+    pixel-weighted mean part distance; "shading", `lt.shading_loss` (the layout of light and shadow
+    inside each part, blind to the materials' albedo).
     """
+    return [(h, scale, values[loss]) for h, scale, values in lighting_losses(
+        frame, scene, materials, hypotheses, weights, erode_pixels, (loss,))]
+
+
+def lighting_losses(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
+                    hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights, erode_pixels: int = 1,
+                    kinds: Sequence[str] = ("appearance",)) -> list[tuple[lt.Hypothesis, float, dict[str, float]]]:
+    """(hypothesis, exposure, {kind: loss}) of each (hypothesis, envmap spec), each rendered once (`score_lighting`)."""
     if not scene.photo_stats:
         raise ValueError("no observed part to light (every aligned part is too small)")
     ids = frame.part_ids(scene.mesh, scene.camera)
     photo = scene.photo_stats
     photo_means = lt.region_means(scene.photo_linear, scene.masks)
     rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
+    sigma = lt.SHADING_SIGMA * frame.size
     scored = []
     for hypothesis, envmap in hypotheses:
         rgba = scene.render(frame, materials, envmap)
         scale = lt.exposure(lt.region_means(rgba[..., :3], rendered_masks), photo_means)
-        dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
-                                 erode_pixels)
-        sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
-        loss = sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values()) if sizes else math.inf
-        scored.append((hypothesis, scale, loss))
+        values: dict[str, float] = {}
+        if "shading" in kinds:
+            values["shading"] = lt.shading_loss(scene.exposed_linear(rgba, scale), scene.photo_linear,
+                                                {i: (rendered_masks[i], scene.masks[i]) for i in photo}, sigma)
+        if "appearance" in kinds:
+            dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
+                                     erode_pixels)
+            sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
+            values["appearance"] = (sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values())
+                                    if sizes else math.inf)
+        scored.append((hypothesis, scale, values))
     return scored
+
+
+def pick_lighting(scored: Sequence[tuple[lt.Hypothesis, float, dict[str, float]]],
+                  loss: str) -> tuple[lt.Hypothesis, float, float]:
+    """The (hypothesis, exposure, loss) `loss` chooses among `lighting_losses`' results.
+
+    "appearance" and "shading": the lowest of that loss. "shading-rotation": each envmap's rotation by
+    the shading loss (where the light falls, whatever the first materials' albedo), then the envmap by
+    the appearance loss at that rotation (the light's colour and strength, which shading cannot see).
+    """
+    if loss != "shading-rotation":
+        return lt.best([(h, scale, values[loss]) for h, scale, values in scored])
+    finalists = []
+    for envmap_id in sorted({h.envmap_id for h, _, _ in scored}):
+        group = [item for item in scored if item[0].envmap_id == envmap_id]
+        try:
+            turned, _, _ = lt.best([(h, scale, values["shading"]) for h, scale, values in group])
+        except ValueError:  # no part shared by render and photo: the appearance alone decides
+            turned = None
+        finalists += [(h, scale, values["appearance"]) for h, scale, values in group if turned in (None, h)]
+    return lt.best(finalists)
 
 
 def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
                       envmaps: Mapping[int, Callable[[float], Any]], rotations: int, weights: Weights,
-                      keep: int | None = None, erode_pixels: int = 1) -> tuple[lt.Hypothesis, float, float, int]:
+                      keep: int | None = None, erode_pixels: int = 1,
+                      loss: str = "appearance") -> tuple[lt.Hypothesis, float, float, int]:
     """(hypothesis, exposure, loss, renders) of the envmap and rotation that best explain the photo.
 
     `envmaps`: envmap id -> its render spec at a rotation. Every envmap is tried at `rotations`
     azimuths; with more envmaps than `keep`, all are first screened at (up to) two azimuths and only
     the `keep` best are searched at every azimuth, so the cost grows with the library by two renders
-    per envmap rather than `rotations`.
+    per envmap rather than `rotations`. `loss`: one of `LIGHTING_LOSSES` (`pick_lighting`).
     """
+    if loss not in LIGHTING_LOSSES:
+        raise ValueError(f"unknown lighting loss {loss!r}; choose from {', '.join(LIGHTING_LOSSES)}")
+    kinds = ("appearance", "shading") if loss == "shading-rotation" else (loss,)
     angles = lt.rotations(rotations)
-    scored: dict[lt.Hypothesis, tuple[lt.Hypothesis, float, float]] = {}
+    scored: dict[lt.Hypothesis, tuple[lt.Hypothesis, float, dict[str, float]]] = {}
 
     def run(hypotheses: list[lt.Hypothesis]) -> None:
         fresh = [h for h in hypotheses if h not in scored]
-        for item in score_lighting(frame, scene, materials, [(h, envmaps[h.envmap_id](h.rotation)) for h in fresh],
-                                   weights, erode_pixels):
+        for item in lighting_losses(frame, scene, materials, [(h, envmaps[h.envmap_id](h.rotation)) for h in fresh],
+                                    weights, erode_pixels, kinds):
             scored[item[0]] = item
 
     ids = sorted(envmaps)
     if keep is not None and 0 < keep < len(ids):
         run([lt.Hypothesis(e, r) for e in ids for r in angles[:: max(1, len(angles) // 2)][:2]])
-        best_of = {e: min(loss for h, _, loss in scored.values() if h.envmap_id == e) for e in ids}
-        ids = sorted(ids, key=lambda e: (best_of[e], e))[:keep]
+
+        def screened(envmap_id: int) -> float:
+            try:
+                return pick_lighting([i for i in scored.values() if i[0].envmap_id == envmap_id], loss)[2]
+            except ValueError:
+                return math.inf
+
+        ids = sorted(ids, key=lambda e: (screened(e), e))[:keep]
     run([lt.Hypothesis(e, r) for e in ids for r in angles])
-    h, scale, loss = lt.best(list(scored.values()))
-    return h, scale, loss, len(scored)
+    h, scale, value = pick_lighting(list(scored.values()), loss)
+    return h, scale, value, len(scored)
 
 
 @dataclass

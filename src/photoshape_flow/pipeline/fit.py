@@ -144,7 +144,8 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
                                    for i, c in candidates.items() if c}}
         materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
         h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
-                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode)
+                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode,
+                                                    ctx.cfg.lighting_loss)
         light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
                  "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
     return light

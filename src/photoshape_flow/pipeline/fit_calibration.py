@@ -19,8 +19,10 @@ under val envmaps, true material of every part known from its spec) becomes a ca
    camera; each observed part whose true material is among its candidates is one `fit.calibrate.Case`.
 
 Each blur of `fit.calibration_blurs` measures the same renders (rendered once, `CachedFrame`); the
-blur with the lowest cross-validated log-loss is kept. The weights and temperature are fitted on
-all its cases (`fit.calibrate.fit`, centred on the hand-set weights) and stored in the
+blur and the model (every weight fitted, the hand-set weights with only their temperature fitted, or
+the hand-set weights as they are: `choices`) with the lowest cross-validated log-loss are kept and
+refitted on all that blur's cases (`fit.calibrate.fit`, centred on the hand-set weights, or
+`fit.calibrate.fit_temperature`) and stored in the
 classifier's `metrics["fit_calibration"]` with a key of everything they depend on (code, fit config,
 checkpoint, the sampled renders, enabled materials, training envmaps, exemplar size, seed), like the D24
 calibrations; `run_fit` computes them when the key changed and the stage then ranks with them. Two
@@ -54,9 +56,12 @@ from photoshape_flow.vocab import STATUS_OK
 
 log = logging.getLogger(__name__)
 
-CODE_VERSION = "fit-calibration-2"  # 2: photos degraded at the exemplars' size (D45)
+CODE_VERSION = "fit-calibration-3"  # 2: photos degraded at the exemplars' size (D45); 3: model chosen (D48)
 METRICS_KEY = "fit_calibration"  # classifier.metrics entry
 KINDS = ("training", "bootstrap")  # both rounds' val renders: val shapes under val envmaps
+# what a calibration may keep (`choices`): every weight and the temperature fitted, the hand-set weights
+# with their temperature fitted, or the hand-set weights as they are (temperature 1)
+MODELS = ("fitted", "hand_set_temperature", "hand_set")
 
 
 class CachedFrame(FrameRenderer):
@@ -294,33 +299,54 @@ def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ran
     frame.clear()
     base = hand_set(ctx.cfg)
     by_blur: dict[str, Any] = {}
-    best: tuple[float, float] | None = None  # (log-loss, blur)
+    best: tuple[float, float, str] | None = None  # (log-loss, blur, model)
     for b in blurs:
         usable = cal.usable(cases[b])
         if not usable:
             continue
         checked = held_out(usable, ctx.cfg)
-        loss = (checked["fitted"]["log_loss"] if checked.get("cases")
-                else cal.score(cal.fit(usable, start=base, centre=base).theta, usable).log_loss)
         by_blur[str(b)] = {"cases": len(usable), "held_out": checked}
-        if best is None or loss < best[0]:
-            best = (loss, b)
+        for loss, model in choices(checked, usable, base):
+            if best is None or loss < best[0]:
+                best = (loss, b, model)
     if best is None:
         log.warning("fit calibration: no usable case in %d validation renders; hand-set weights", len(renders))
         return None
-    blur = best[1]
-    fitted = cal.fit(cal.usable(cases[blur]), start=base, centre=base)
+    _, blur, model = best
+    chosen = cal.usable(cases[blur])
+    fitted = refit(model, chosen, base)
     if not np.isfinite(fitted.temperature):
         log.warning("fit calibration: no term carries information on these cases; hand-set weights")
         return None
     record = {"weights": dict(zip(cal.TERMS, (round(w, 6) for w in fitted.weights), strict=True)),
-              "temperature": round(fitted.temperature, 6), "blur": blur, "photo_size": photo_size,
+              "temperature": round(fitted.temperature, 6), "blur": blur, "model": model, "photo_size": photo_size,
               **by_blur[str(blur)], **counts,
               "by_blur": by_blur, "seconds": round(time.perf_counter() - started, 2)}
-    log.info("fit calibration (classifier %s): blur %s, weights %s, temperature %.3f on %d cases from %d renders "
-             "(%.1f s); held out: %s", ctx.classifier.id, blur, record["weights"], fitted.temperature,
+    log.info("fit calibration (classifier %s): blur %s, %s weights %s, temperature %.3f on %d cases from %d renders "
+             "(%.1f s); held out: %s", ctx.classifier.id, blur, model, record["weights"], fitted.temperature,
              record["cases"], counts["renders"], record["seconds"], record["held_out"])
     return record
+
+
+def choices(checked: dict[str, Any], usable: Sequence[cal.Case], base: np.ndarray) -> list[tuple[float, str]]:
+    """(held-out log-loss, model) of each of `MODELS` on one blur's cases.
+
+    Fitting five weights (or even a temperature) on a few dozen renders can over-fit: where the held-out
+    figures favour a model with fewer fitted numbers, that model is kept (D48). Without two usable folds
+    the in-sample log-loss of the fitted weights is all there is.
+    """
+    if not checked.get("cases"):
+        return [(cal.score(cal.fit(usable, start=base, centre=base).theta, usable).log_loss, "fitted")]
+    return [(float(checked[model]["log_loss"]), model) for model in MODELS]
+
+
+def refit(model: str, cases: Sequence[cal.Case], base: np.ndarray) -> cal.Fit:
+    """`model` (one of `MODELS`) fitted on all of `cases`, the hand-set weights `base` its start and centre."""
+    if model == "fitted":
+        return cal.fit(cases, start=base, centre=base)
+    if model == "hand_set_temperature":
+        return cal.Fit.from_theta(base / cal.fit_temperature(cases, base))
+    return cal.Fit.from_theta(base)
 
 
 def ensure_calibration(ctx: Any, settings: Settings, progress: Progress | None = None) -> dict[str, Any] | None:

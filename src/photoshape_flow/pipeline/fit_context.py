@@ -165,6 +165,7 @@ def weights_report(ctx: FitContext) -> dict[str, Any]:
                            "prior": round(ctx.prior_weight, 4),
                            "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
     if ctx.calibration is not None:
+        out["model"] = ctx.calibration.get("model", "fitted")
         out["cases"] = ctx.calibration.get("cases")
         out["held_out"] = ctx.calibration.get("held_out")
     return out
