@@ -44,5 +44,5 @@ STATUS_FAILED = "failed"
 STATUS_REJECTED = "rejected"
 STATUS_PENDING = "pending"
 
-# what picks fit's lighting per exemplar (`fit.scene.score_lighting`, `FitConfig.lighting_loss`)
+# what picks fit's lighting per exemplar (`fit.scene.estimate_lighting`, `FitConfig.lighting_loss`)
 LIGHTING_LOSSES: tuple[str, ...] = ("appearance", "shading", "shading-rotation")

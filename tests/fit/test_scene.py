@@ -150,9 +150,11 @@ def test_the_shading_loss_ignores_albedo_and_exposure_but_not_where_the_light_fa
     left[:, :12], right[:, 12:] = True, True
     gains = np.where(left[..., None], [0.3, 0.5, 0.9], [1.7, 1.1, 0.4]).astype(np.float32)
     regions = {1: (left, left), 2: (right, right)}
-    assert lt.shading_loss(ramp, ramp * gains, regions, 2.0) == pytest.approx(0.0, abs=1e-9)
-    assert lt.shading_loss(ramp[:, ::-1], ramp * gains, regions, 2.0) > 0.05
-    assert lt.shading_loss(ramp, ramp, {1: (left, right)}, 2.0) == float("inf")  # no pixel in both regions
+    photo = lt.photo_shading(ramp * gains, {1: left, 2: right}, 2.0)
+    assert lt.shading_loss(ramp, photo, regions, 2.0) == pytest.approx(0.0, abs=1e-9)
+    assert lt.shading_loss(ramp[:, ::-1], photo, regions, 2.0) > 0.05
+    assert lt.shading_loss(ramp, lt.photo_shading(ramp, {1: right}, 2.0), {1: (left, right)},
+                           2.0) == float("inf")  # no pixel in both regions
 
 
 def test_a_render_is_blended_with_the_photos_background_at_its_silhouette() -> None:

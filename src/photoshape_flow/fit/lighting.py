@@ -85,26 +85,30 @@ def log_shading(linear: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarra
     return np.log(np.maximum(rgb, SHADING_FLOOR))
 
 
-def shading_loss(rendered: np.ndarray, photo: np.ndarray, regions: Mapping[int, tuple[np.ndarray, np.ndarray]],
-                 sigma: float) -> float:
+def photo_shading(photo: np.ndarray, masks: Mapping[int, np.ndarray], sigma: float) -> dict[int, np.ndarray]:
+    """The photo's `log_shading` inside each part's mask: computed once, compared with every hypothesis."""
+    return {index: log_shading(photo, mask, sigma) for index, mask in masks.items()}
+
+
+def shading_loss(rendered: np.ndarray, photo: Mapping[int, np.ndarray],
+                 regions: Mapping[int, tuple[np.ndarray, np.ndarray]], sigma: float) -> float:
     """Pixel-weighted mean, over parts, of the variance of log(render / photo) inside the part, per channel.
 
-    `rendered` and `photo` are linear RGB; `regions` part -> (render mask, photo mask), each side blurred
-    inside its own mask (`log_shading`) and compared where both hold. Removing each part's mean log-ratio
-    per channel removes its albedo (and the exposure and any white balance), so what is left is where
-    the light and the shadows fall on the part, and the colour of the key light against the fill's: a
-    hypothesis cannot win by tinting a wrong first material toward the photo's colour, which the
-    appearance loss allows (D39, D49).
+    `rendered` is linear RGB, blurred inside each part's render mask (`log_shading`); `photo` the
+    photo's `photo_shading`; `regions` part -> (render mask, photo mask), compared where both hold.
+    Removing each part's mean log-ratio per channel removes its albedo (and the exposure and any white
+    balance), so what is left is where the light and the shadows fall on the part, and the colour of
+    the key light against the fill's: a hypothesis cannot win by tinting a wrong first material toward
+    the photo's colour, which the appearance loss allows (D39, D49).
     """
     total = 0.0
     count = 0
-    for render_mask, photo_mask in regions.values():
+    for index, (render_mask, photo_mask) in regions.items():
         both = np.asarray(render_mask, bool) & np.asarray(photo_mask, bool)
         n = int(both.sum())
         if n < MIN_SHARED:
             continue
-        ratio = (log_shading(rendered, render_mask, sigma)[both].astype(np.float64)
-                 - log_shading(photo, photo_mask, sigma)[both])
+        ratio = log_shading(rendered, render_mask, sigma)[both].astype(np.float64) - photo[index][both]
         total += float(((ratio - ratio.mean(axis=0)) ** 2).sum()) / ratio.shape[1]
         count += n
     return total / count if count else float("inf")

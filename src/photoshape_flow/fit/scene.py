@@ -184,8 +184,11 @@ def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[An
     Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
     closed-form fit of the per-part mean colours. Its loss (`lighting_losses`): "appearance", the
     pixel-weighted mean part distance; "shading", `lt.shading_loss` (the layout of light and shadow
-    inside each part, blind to the materials' albedo).
+    inside each part, blind to the materials' albedo). "shading-rotation" combines both and is chosen
+    by `pick_lighting`, not here.
     """
+    if loss not in ("appearance", "shading"):
+        raise ValueError(f"score_lighting scores one loss, appearance or shading; got {loss!r}")
     return [(h, scale, values[loss]) for h, scale, values in lighting_losses(
         frame, scene, materials, hypotheses, weights, erode_pixels, (loss,))]
 
@@ -201,13 +204,15 @@ def lighting_losses(frame: FrameRenderer, scene: FitScene, materials: Sequence[A
     photo_means = lt.region_means(scene.photo_linear, scene.masks)
     rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
     sigma = lt.SHADING_SIGMA * frame.size
+    shading = lt.photo_shading(scene.photo_linear, {i: scene.masks[i] for i in photo}, sigma) \
+        if "shading" in kinds else {}
     scored = []
     for hypothesis, envmap in hypotheses:
         rgba = scene.render(frame, materials, envmap)
         scale = lt.exposure(lt.region_means(rgba[..., :3], rendered_masks), photo_means)
         values: dict[str, float] = {}
         if "shading" in kinds:
-            values["shading"] = lt.shading_loss(scene.exposed_linear(rgba, scale), scene.photo_linear,
+            values["shading"] = lt.shading_loss(scene.exposed_linear(rgba, scale), shading,
                                                 {i: (rendered_masks[i], scene.masks[i]) for i in photo}, sigma)
         if "appearance" in kinds:
             dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
