@@ -167,3 +167,22 @@ def test_best_validation_epoch_is_kept_across_a_resume(tmp_path: Path, monkeypat
     reloaded = select_best(resumed.checkpoint)  # type: ignore[arg-type]
     for key, value in chosen["model"].items():
         assert torch.equal(reloaded["model"][key], value), key
+
+
+def test_workers_start_from_a_fork_server_once_a_gpu_is_driven(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Forking a process that drives CUDA can deadlock its workers, so on cuda they start from a fork
+    server: the dataset must then cross a pickle. Trained here with the fork server forced on the CPU,
+    the same losses as with forked workers."""
+    assert train_module.worker_context(2, "cuda") == "forkserver"
+    assert train_module.worker_context(0, "cuda") is None and train_module.worker_context(2, "cpu") is None
+    data = _datasets(tmp_path, 4)
+    config = get_config("tiny", epochs=1, batch_size=4, max_steps_per_epoch=2, num_workers=1)
+
+    def run() -> float:
+        model = build_model(config.arch, len(MATERIALS), width=config.width, seed=0)
+        result = train_classifier(model, data, data, config, materials=MATERIALS, material_substances=SUBSTANCES)
+        return result.history[0]["train_loss"]
+
+    forked = run()
+    monkeypatch.setattr(train_module, "worker_context", lambda workers, device: "forkserver" if workers else None)
+    assert run() == pytest.approx(forked, rel=1e-5)

@@ -190,13 +190,22 @@ def test_material_classifier_trains_resumes_and_infers_on_device(tmp_path: Path,
 
 def test_material_classifier_paper_options_on_device(tmp_path: Path, device: str) -> None:
     """channels_last and DataLoader workers with pinned memory, as the "paper" (CUDA) config trains."""
+    import warnings
+
+    from photoshape_flow.classify.train import worker_context
+
     train, val = _region_sets(tmp_path, count=4)
     config = classifier_config("tiny", epochs=1, batch_size=8, max_steps_per_epoch=2, channels_last=True,
                                num_workers=2)
-    result = train_classifier(
-        build_model(config.arch, len(MATERIALS), width=config.width, seed=0), train, val, config,
-        materials=MATERIALS, material_substances=SUBSTANCES, device=device,
-    )
+    if device.startswith("cuda"):  # workers start from a fork server, not a fork of a CUDA process
+        assert worker_context(config.num_workers, device) == "forkserver"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = train_classifier(
+            build_model(config.arch, len(MATERIALS), width=config.width, seed=0), train, val, config,
+            materials=MATERIALS, material_substances=SUBSTANCES, device=device,
+        )
+    assert not [w for w in caught if "fork()" in str(w.message)], [str(w.message) for w in caught]
     assert result.epoch == 1 and math.isfinite(result.history[0]["train_loss"])
     assert result.history[0]["val_examples"] == len(val)
     assert result.model.conv1.weight.is_contiguous(memory_format=torch.channels_last)

@@ -59,6 +59,20 @@ def test_no_other_table_maps_stage_names_to_code() -> None:
     assert found == {}
 
 
+def test_batches_details_add_counts_and_seconds_and_keep_the_latest_settings() -> None:
+    """A run fanned out in batches reports its totals: counts and each phase's seconds add, lists join,
+    a setting or a rate (not a count) is the later batch's."""
+    a = StageReport("fit", details={"fit:2": {"pairs": 3, "seconds": {"selection": 1.5}, "failed": [[1, "x"]],
+                                              "weights": {"color": 0.3, "cases": 40}, "ok": True}})
+    b = StageReport("fit", details={"fit:2": {"pairs": 2, "seconds": {"selection": 1.0, "lighting": 2.0},
+                                              "failed": [], "weights": {"color": 0.5, "cases": 40}, "ok": True},
+                                    "other": 1})
+    merged = a.merge(b).details
+    assert merged["fit:2"]["pairs"] == 5 and merged["fit:2"]["seconds"] == {"selection": 2.5, "lighting": 2.0}
+    assert merged["fit:2"]["failed"] == [[1, "x"]] and merged["fit:2"]["ok"] is True and merged["other"] == 1
+    assert merged["fit:2"]["weights"] == {"color": 0.5, "cases": 40}  # a setting: the later batch's
+
+
 def test_reports_merge_counts_holders_and_the_latest_expiry() -> None:
     early, late = dt.datetime(2026, 1, 1, tzinfo=dt.UTC), dt.datetime(2026, 1, 2, tzinfo=dt.UTC)
     a = StageReport("publish", done=2, skipped=1, blocked=Blocked(1, ("w1",), early), seconds=1.5, details={"a": 1})

@@ -105,6 +105,16 @@ def select_best(checkpoint: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def worker_context(num_workers: int, device: torch.device | str) -> str | None:
+    """How data-loader workers start: "forkserver" once the process drives a GPU, else the default.
+
+    Forking a process whose CUDA runtime is running copies its threads' locks half-held, and a worker
+    can deadlock (Python warns at every fork); a fork server starts workers from a clean process. On
+    the CPU the default fork is kept: it is faster to start and nothing is at risk.
+    """
+    return "forkserver" if num_workers > 0 and torch.device(device).type == "cuda" else None
+
+
 @torch.inference_mode()
 def evaluate(
     model: MaterialResNet,
@@ -122,7 +132,8 @@ def evaluate(
     index = material_substance_index(material_substances).to(device)
     correct = dict.fromkeys(METRIC_KEYS, 0)
     total, loss_sum = 0, 0.0
-    loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=num_workers)
+    loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=num_workers,
+                        multiprocessing_context=worker_context(num_workers, device))
     for x, y_mat, y_sub in loader:
         keep = y_mat > 0
         if not bool(keep.any()):
@@ -237,7 +248,8 @@ def train_classifier(
         total_steps = total_epochs * num_batches
         sampler = order[: num_batches * batch_size].tolist()
         loader = DataLoader(train_set, batch_size=batch_size, sampler=sampler, num_workers=config.num_workers,
-                            pin_memory=device.type == "cuda", persistent_workers=False)
+                            pin_memory=device.type == "cuda", persistent_workers=False,
+                            multiprocessing_context=worker_context(config.num_workers, device))
         model.train()
         sums = {"loss": 0.0, "material": 0.0, "substance": 0.0}
         images = 0

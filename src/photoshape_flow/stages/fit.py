@@ -34,9 +34,11 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
         blocked=blocked_by(summary.blocked),
+        # counts and seconds only (per-unit rates are seconds over counts): batches' reports add up
         details={summary.method_key or "fit": {"pairs": summary.pairs_done, "rows": summary.rows,
                                                "parts_changed": summary.changed, "parts_refined": summary.refined,
+                                               "refined_pairs": summary.refined_pairs,
                                                "lightings": summary.lightings, "weights": summary.weights,
                                                "seconds": {k: round(v, 2) for k, v in summary.seconds.items()},
-                                               **summary.per_unit(), "failed": summary.pairs_failed[:20]}},
+                                               "failed": summary.pairs_failed[:20]}},
     )

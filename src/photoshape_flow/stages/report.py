@@ -51,7 +51,7 @@ class StageReport:
     details: dict[str, Any] = field(default_factory=dict)
 
     def merge(self, other: StageReport) -> StageReport:
-        """The sum of two reports of the same stage (batches of one run); details keyed by part."""
+        """The sum of two reports of the same stage (batches of one run); details by `merge_details`."""
         until = max((u for u in (self.blocked.until, other.blocked.until) if u is not None), default=None)
         return StageReport(
             stage=self.stage,
@@ -62,12 +62,41 @@ class StageReport:
             blocked=Blocked(self.blocked.count + other.blocked.count,
                             tuple(dict.fromkeys(self.blocked.holders + other.blocked.holders)), until),
             seconds=self.seconds + other.seconds,
-            details={**self.details, **other.details},
+            details=merge_details(self.details, other.details),
         )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-friendly (Prefect task results, the `pipeline_run` row)."""
         return _plain(asdict(self))
+
+
+SETTINGS = frozenset({"weights"})  # details that say how a batch ran (fit's cost weights), not what it did
+
+
+def merge_details(a: dict[str, Any], b: dict[str, Any], key: str = "") -> dict[str, Any]:
+    """Two batches' details as one run's: counts (ints) add, wall times (the numbers of a ``seconds``
+    dict) add, lists join, dicts merge key by key; anything else (a flag, a ratio, a `SETTINGS` dict
+    such as the weights a batch used) is the later batch's. A run fanned out in batches then reports
+    its totals, not its last batch's."""
+    out = dict(a)
+    for name, value in b.items():
+        if name not in out or name in SETTINGS:
+            out[name] = value
+            continue
+        mine = out[name]
+        if isinstance(mine, dict) and isinstance(value, dict):
+            out[name] = merge_details(mine, value, name)
+        elif isinstance(mine, list) and isinstance(value, list):
+            out[name] = mine + value
+        elif _count(mine) and _count(value) and (isinstance(mine, int) and isinstance(value, int) or key == "seconds"):
+            out[name] = mine + value
+        else:
+            out[name] = value
+    return out
+
+
+def _count(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _plain(obj: Any) -> Any:
