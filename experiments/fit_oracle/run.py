@@ -264,7 +264,7 @@ class Oracle:
             lit_data = data if lighting == "est" else dataclasses.replace(data, rows={
                 i: [m.Assignment(material_id=truth[i])] for i in data.rows if i in truth})
             light = lighting_estimate(ctx, lit_data)
-            envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+            envmap = ctx.light_envmap(light)
             exposure = float(light["exposure"])
         renders = sc.render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
         grid = (1.0,) if lighting == "truex" else sc.exposure_grid(cfg.exposure_stops)  # truex: kept as it is

@@ -27,7 +27,7 @@ from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.substance_configs import PRESETS as SUBSTANCE_PRESETS
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS
-from photoshape_flow.vocab import ASSIGNMENT_METHODS, LIGHTING_LOSSES
+from photoshape_flow.vocab import ASSIGNMENT_METHODS, LIGHTING_CORRECTIONS, LIGHTING_LOSSES
 
 
 class ProfileError(ValueError):
@@ -112,6 +112,10 @@ class FitConfig:
     lighting_loss: str = "appearance"  # what picks the lighting: the first materials' "appearance", "shading"
     #                                    (where light and shadow fall in each part, albedo removed) or
     #                                    "shading-rotation" (rotation by shading, envmap by appearance); D49
+    lighting_correction: str = "none"  # "lobes": the chosen envmap's six lobes re-weighted to the photo's
+    #                                    shading, six more renders per exemplar (`fit.scene.correct_lighting`, D50);
+    #                                    "lobes-rgb": a gain per lobe and channel
+    lighting_lobe_strength: float = 0.02  # pull of the lobes' log gains toward each other (1: the envmap as is)
     erode: int = 1  # pixels shrunk off each part mask before comparing
     blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
     exposure_stops: float = 2.0  # each candidate judged at its best exposure this far either side of the
@@ -139,6 +143,9 @@ class FitConfig:
         if self.lighting_loss not in LIGHTING_LOSSES:
             raise ProfileError(f"fit.lighting_loss: unknown loss {self.lighting_loss!r}; "
                                f"choose from {', '.join(LIGHTING_LOSSES)}")
+        if self.lighting_correction not in LIGHTING_CORRECTIONS:
+            raise ProfileError(f"fit.lighting_correction: unknown correction {self.lighting_correction!r}; "
+                               f"choose from {', '.join(LIGHTING_CORRECTIONS)}")
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)

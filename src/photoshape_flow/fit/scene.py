@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -282,6 +282,33 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
     run([lt.Hypothesis(e, r) for e in ids for r in angles])
     h, scale, value = pick_lighting(list(scored.values()), loss)
     return h, scale, value, len(scored)
+
+
+def correct_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any], envmap: Any,
+                     strength: float, erode_pixels: int = 1,
+                     per_channel: bool = False) -> tuple[tuple[float, ...], float, float, float]:
+    """(lobe gains, exposure, shading loss before, after) reshaping `envmap` toward the photo's light
+    (six grey gains, or with `per_channel` six RGB triples in a row, as `EnvmapSpec.lobes` takes them).
+
+    The scene is rendered once under each of the envmap's six lobes alone (`specs.LOBE_AXES`); the
+    gains come from `lt.fit_lobes` (where light and shadow fall inside each part, albedo removed), and
+    the exposure is solved in closed form on the gains' weighted sum, which is the render under the
+    corrected envmap (light transport is linear in the emitted radiance): six renders, none more.
+    """
+    from photoshape_flow.render.specs import LOBE_AXES
+
+    ids = frame.part_ids(scene.mesh, scene.camera)
+    photo = scene.photo_stats
+    rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
+    sigma = lt.SHADING_SIGMA * frame.size
+    basis = [scene.render(frame, materials, replace(envmap, lobes=tuple(float(k == j) for k in range(len(LOBE_AXES)))))
+             for j in range(len(LOBE_AXES))]
+    regions = {i: (rendered_masks[i], scene.masks[i]) for i in photo}
+    shading = lt.photo_shading(scene.photo_linear, {i: scene.masks[i] for i in photo}, sigma)
+    gains, before, after = lt.fit_lobes(basis, shading, regions, sigma, strength, per_channel)
+    corrected = sum(np.asarray(g, np.float32) * b[..., :3] for g, b in zip(gains, basis, strict=True))
+    scale = lt.exposure(lt.region_means(corrected, rendered_masks), lt.region_means(scene.photo_linear, scene.masks))
+    return tuple(round(float(g), 4) for g in np.ravel(gains)), scale, before, after
 
 
 @dataclass

@@ -4,7 +4,9 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
 
 1. Lighting of the exemplar (`estimate_lighting`): every training envmap at `rotations` azimuths,
    each rendered with the classifier's rank-1 materials at the exemplar's reference pair's camera,
-   exposure solved in closed form (`fit.lighting`); the lowest appearance loss wins. Stored in
+   exposure solved in closed form (`fit.lighting`); the lowest appearance loss wins; with
+   `lighting_correction="lobes"` the winner's six lobes are re-weighted to the photo's shading
+   (`correct_lighting`, D50). Stored in
    ``exemplar.meta["fit_lighting"]`` with the key of its inputs and reused by every pair of the
    exemplar until those inputs change.
 2. Candidates per observed part (`fit.candidates`): the ranking's top-K, the colour-nearest material
@@ -47,6 +49,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.scene import (
+    correct_lighting,
     estimate_lighting,
     render_candidates,
     select_profiled,
@@ -148,6 +151,12 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
                                                     ctx.cfg.lighting_loss)
         light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
                  "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
+    if ctx.cfg.lighting_correction != "none" and light["envmap_id"] is not None:
+        lobes, scale, before, after = correct_lighting(ctx.frame, data.scene, materials, ctx.light_envmap(light),
+                                                       ctx.cfg.lighting_lobe_strength, ctx.cfg.erode,
+                                                       per_channel=ctx.cfg.lighting_correction == "lobes-rgb")
+        light.update(lobes=list(lobes), exposure=round(scale, 6),
+                     shading_loss=[round(before, 6), round(after, 6)])
     return light
 
 
@@ -215,7 +224,7 @@ def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list
     if not candidates:
         return {}, float(light.get("exposure", 1.0))
     if envmap is None:
-        envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+        envmap = ctx.light_envmap(light)
     renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap)
     distances, _, exposure = select_profiled(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
                                              ctx.weights, ctx.prior_weight, ctx.cfg.exposure_stops, ctx.cfg.erode)

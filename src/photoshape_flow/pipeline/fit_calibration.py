@@ -200,7 +200,7 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Set
     candidates = candidates_of(ctx, data)
     if not candidates:
         return [], counts
-    envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+    envmap = ctx.light_envmap(light)
     renders = render_candidates(ctx.frame, scene, data.rank1(), candidates, ctx.spec, envmap)
     measured, _, _ = profiled_terms(renders, scene, candidates, float(light["exposure"]), ctx.weights,
                                     ctx.prior_weight, exposure_grid(ctx.cfg.exposure_stops), ctx.cfg.erode)

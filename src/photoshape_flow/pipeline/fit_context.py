@@ -112,6 +112,13 @@ class FitContext:
         blob = self.envmaps.get(envmap_id) if envmap_id is not None else None
         return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
 
+    def light_envmap(self, light: dict[str, Any]) -> Any:
+        """The render spec of an exemplar's stored lighting (`pipeline.fit.lighting_estimate`): its training
+        envmap at its rotation, reshaped by its lobe gains when the lighting was corrected."""
+        spec = self.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+        lobes = light.get("lobes")
+        return spec if spec is None or not lobes else dataclasses.replace(spec, lobes=tuple(lobes))
+
     def mesh(self, shape: m.Shape) -> Any:
         from photoshape_flow.geometry.mesh import ShapeMesh
 

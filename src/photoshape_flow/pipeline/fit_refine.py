@@ -51,7 +51,7 @@ def refine_rows(ctx: Any, data: Any, rows: Sequence[m.Assignment], light: dict[s
     if not observed:
         return 0
     materials = [ctx.spec(chosen[p.index].material_id) if p.index in chosen else None for p in data.scene.mesh.parts]
-    envmap = ctx.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
+    envmap = ctx.light_envmap(light)
     renderer, cfg = ctx.frame.renderer, ctx.cfg
     frame = FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp)
     uv_frame = FrameRenderer(renderer, cfg.size, cfg.refine_spp)  # the photo's frame; refine_spp: measured
