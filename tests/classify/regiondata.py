@@ -1,7 +1,8 @@
-"""Colour-coded toy training renders for the material classifier tests (no renderer needed).
+"""Colour-coded toy training data for the classifier and substance-network tests (no renderer needed).
 
 Each render is a white square with two or three rectangular regions; every material has its own
 colour plus a material-specific stripe pattern, so a small network can tell them apart in a few steps.
+`toy_substances` is the substance network's equivalent: rectangles whose colour encodes the label.
 """
 
 from __future__ import annotations
@@ -12,6 +13,30 @@ import cv2
 import numpy as np
 
 from photoshape_flow.classify.dataset import RenderItem
+from photoshape_flow.classify.substance_net import NUM_CLASSES
+from photoshape_flow.classify.substance_train import SubstanceData
+
+# substance label -> RGB colour of `toy_substances`' rectangles
+SUBSTANCE_COLOURS = {1: (120, 60, 30), 2: (40, 90, 160), 3: (170, 120, 70), 4: (150, 150, 160), 5: (30, 160, 60)}
+
+
+def toy_substances(n: int, size: int = 32, seed: int = 0) -> SubstanceData:
+    """White background with two rectangles whose colour encodes their substance label."""
+    rng = np.random.default_rng(seed)
+    images, labels = [], []
+    for _ in range(n):
+        image = np.full((size, size, 3), 255, np.uint8)
+        label = np.zeros((size, size), np.uint8)
+        for _rect in range(2):
+            k = int(rng.integers(1, NUM_CLASSES))
+            y0, x0 = rng.integers(0, size // 2, 2)
+            h, w = rng.integers(size // 4, size // 2, 2)
+            noise = rng.integers(-15, 16, (h, w, 3))
+            image[y0 : y0 + h, x0 : x0 + w] = np.clip(np.array(SUBSTANCE_COLOURS[k]) + noise, 0, 255)
+            label[y0 : y0 + h, x0 : x0 + w] = k
+        images.append(image)
+        labels.append(label)
+    return SubstanceData(images=images, labels=labels)
 
 # material id -> (substance, RGB colour)
 TOY_MATERIALS: dict[int, tuple[str, tuple[int, int, int]]] = {

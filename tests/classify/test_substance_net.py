@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from tests.classify.regiondata import SUBSTANCE_COLOURS, toy_substances
 
 from photoshape_flow.classify.substance_configs import get_config
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
@@ -22,27 +23,6 @@ from photoshape_flow.classify.substance_train import (
     train_substance_net,
 )
 
-COLOURS = {1: (120, 60, 30), 2: (40, 90, 160), 3: (170, 120, 70), 4: (150, 150, 160), 5: (30, 160, 60)}
-
-
-def _toy_data(n: int, size: int = 32, seed: int = 0) -> SubstanceData:
-    """White background with two rectangles whose colour encodes their substance label."""
-    rng = np.random.default_rng(seed)
-    images, labels = [], []
-    for _ in range(n):
-        image = np.full((size, size, 3), 255, np.uint8)
-        label = np.zeros((size, size), np.uint8)
-        for _rect in range(2):
-            k = int(rng.integers(1, NUM_CLASSES))
-            y0, x0 = rng.integers(0, size // 2, 2)
-            h, w = rng.integers(size // 4, size // 2, 2)
-            noise = rng.integers(-15, 16, (h, w, 3))
-            image[y0 : y0 + h, x0 : x0 + w] = np.clip(np.array(COLOURS[k]) + noise, 0, 255)
-            label[y0 : y0 + h, x0 : x0 + w] = k
-        images.append(image)
-        labels.append(label)
-    return SubstanceData(images=images, labels=labels)
-
 
 def test_network_output_shape_any_size() -> None:
     model = SubstanceNet(width=8).eval()
@@ -53,7 +33,7 @@ def test_network_output_shape_any_size() -> None:
 
 def test_overfits_a_tiny_batch() -> None:
     torch.set_num_threads(2)
-    data = _toy_data(4)
+    data = toy_substances(4)
     config = get_config("tiny", epochs=1, iters_per_epoch=60, lr=1e-2, jitter=0.0, crop_scale=(1.0, 1.0), flip=False)
     result = train_substance_net(data, None, config)
     metrics = result.checkpoint["metrics"]
@@ -63,7 +43,7 @@ def test_overfits_a_tiny_batch() -> None:
 
 
 def test_resume_continues_from_the_last_epoch() -> None:
-    data, val = _toy_data(4, seed=1), _toy_data(2, seed=2)
+    data, val = toy_substances(4, seed=1), toy_substances(2, seed=2)
     config = replace(get_config("tiny"), epochs=3, iters_per_epoch=2)
     saved: list[bytes] = []
 
@@ -95,7 +75,7 @@ def test_resume_continues_from_the_last_epoch() -> None:
 
 
 def test_predict_substances_returns_probabilities_at_image_size() -> None:
-    data = _toy_data(2)
+    data = toy_substances(2)
     result = train_substance_net(data, None, get_config("tiny", epochs=1, iters_per_epoch=1))
     model = load_model(checkpoint_from_bytes(checkpoint_to_bytes(result.checkpoint)))
     probs = predict_substances(model, data.images[0][:30, :30], size=32)
@@ -119,7 +99,7 @@ def test_training_frames_renders_and_blur_is_seeded() -> None:
     label = np.zeros((40, 40), np.uint8)
     label[5:15, 10:30] = 2  # a 10 x 20 object: its square is 20 x 20
     image = np.full((40, 40, 3), 255, np.uint8)
-    image[label > 0] = COLOURS[2]
+    image[label > 0] = SUBSTANCE_COLOURS[2]
     framed = SubstanceData([image], [label], ["k"]).framed()
     assert framed.labels[0].shape == (20, 20) and framed.images[0].shape == (20, 20, 3)
     assert (framed.labels[0] > 0).any(axis=0).all()  # the object spans the full width
@@ -134,7 +114,7 @@ def test_training_frames_renders_and_blur_is_seeded() -> None:
 def test_predict_substances_averages_the_mirrored_view() -> None:
     torch.manual_seed(0)
     model = SubstanceNet(width=8).eval()
-    image = _toy_data(1, size=32, seed=3).images[0]
+    image = toy_substances(1, size=32, seed=3).images[0]
     single = predict_substances(model, image, size=32, flip=False)
     mirrored = predict_substances(model, image[:, ::-1], size=32, flip=False)[..., ::-1]
     both = predict_substances(model, image, size=32)

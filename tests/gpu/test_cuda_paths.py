@@ -26,7 +26,14 @@ import pytest
 import torch
 
 try:
-    from tests.classify.regiondata import TOY_MATERIALS, render_arrays, substance_of, write_renders
+    from tests.classify.regiondata import (
+        SUBSTANCE_COLOURS,
+        TOY_MATERIALS,
+        render_arrays,
+        substance_of,
+        toy_substances,
+        write_renders,
+    )
 except ImportError:  # an installed package named "tests" shadows this repository's
     import importlib.util
 
@@ -36,6 +43,7 @@ except ImportError:  # an installed package named "tests" shadows this repositor
     _spec.loader.exec_module(_regiondata)  # type: ignore[union-attr]
     TOY_MATERIALS, render_arrays = _regiondata.TOY_MATERIALS, _regiondata.render_arrays
     substance_of, write_renders = _regiondata.substance_of, _regiondata.write_renders
+    SUBSTANCE_COLOURS, toy_substances = _regiondata.SUBSTANCE_COLOURS, _regiondata.toy_substances
 
 from photoshape_flow.align.retrieval import (
     ArrayDatabase,
@@ -53,7 +61,6 @@ from photoshape_flow.classify.resnet import build_model
 from photoshape_flow.classify.substance_configs import get_config as substance_config
 from photoshape_flow.classify.substance_net import NUM_CLASSES
 from photoshape_flow.classify.substance_train import (
-    SubstanceData,
     checkpoint_from_bytes,
     checkpoint_to_bytes,
     load_model,
@@ -217,29 +224,8 @@ def test_material_classifier_paper_options_on_device(tmp_path: Path, device: str
 
 # -- substance network --------------------------------------------------------------------------------
 
-COLOURS = {1: (120, 60, 30), 2: (40, 90, 160), 3: (170, 120, 70), 4: (150, 150, 160), 5: (30, 160, 60)}
-
-
-def _toy_substances(n: int, size: int = 32, seed: int = 0) -> SubstanceData:
-    """White background with two rectangles whose colour encodes their substance label."""
-    rng = np.random.default_rng(seed)
-    images, labels = [], []
-    for _ in range(n):
-        image = np.full((size, size, 3), 255, np.uint8)
-        label = np.zeros((size, size), np.uint8)
-        for _rect in range(2):
-            k = int(rng.integers(1, NUM_CLASSES))
-            y0, x0 = rng.integers(0, size // 2, 2)
-            h, w = rng.integers(size // 4, size // 2, 2)
-            image[y0 : y0 + h, x0 : x0 + w] = np.clip(np.array(COLOURS[k]) + rng.integers(-15, 16, (h, w, 3)), 0, 255)
-            label[y0 : y0 + h, x0 : x0 + w] = k
-        images.append(image)
-        labels.append(label)
-    return SubstanceData(images=images, labels=labels)
-
-
 def test_substance_network_trains_resumes_and_predicts_on_device(device: str) -> None:
-    data, val = _toy_substances(6, seed=1), _toy_substances(3, seed=2)
+    data, val = toy_substances(6, seed=1), toy_substances(3, seed=2)
     config = substance_config("tiny", epochs=2, iters_per_epoch=3, device=device)
     result = train_substance_net(data, val, config)
     assert result.epochs_run == [1, 2] and _on(result.model, device)
@@ -257,7 +243,7 @@ def test_substance_network_trains_resumes_and_predicts_on_device(device: str) ->
     on_device, on_cpu = load_model(restored, device), load_model(restored, "cpu")
     assert _on(on_device, device) and not on_device.training
     image = np.random.default_rng(5).integers(0, 256, (40, 56, 3), dtype=np.uint8)  # not square, not 32 px
-    image[8:30, 10:40] = COLOURS[2]
+    image[8:30, 10:40] = SUBSTANCE_COLOURS[2]
     p_dev = predict_substances(on_device, image, config.size)
     p_cpu = predict_substances(on_cpu, image, config.size)
     assert p_dev.shape == p_cpu.shape == (NUM_CLASSES, 40, 56) and p_dev.dtype == np.float32
