@@ -68,6 +68,8 @@ def test_batches_details_add_counts_and_seconds_and_keep_the_latest_settings() -
                                               "failed": [], "weights": {"color": 0.5, "cases": 40}, "ok": True},
                                     "other": 1})
     merged = a.merge(b).details
+    publish = StageReport("publish", details={"publish": {"rendered": 2, "render_seconds": 1.5, "method": "fit"}})
+    assert publish.merge(publish).details["publish"] == {"rendered": 4, "render_seconds": 3.0, "method": "fit"}
     assert merged["fit:2"]["pairs"] == 5 and merged["fit:2"]["seconds"] == {"selection": 2.5, "lighting": 2.0}
     assert merged["fit:2"]["failed"] == [[1, "x"]] and merged["fit:2"]["ok"] is True and merged["other"] == 1
     assert merged["fit:2"]["weights"] == {"color": 0.5, "cases": 40}  # a setting: the later batch's

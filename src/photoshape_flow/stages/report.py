@@ -74,10 +74,10 @@ SETTINGS = frozenset({"weights"})  # details that say how a batch ran (fit's cos
 
 
 def merge_details(a: dict[str, Any], b: dict[str, Any], key: str = "") -> dict[str, Any]:
-    """Two batches' details as one run's: counts (ints) add, wall times (the numbers of a ``seconds``
-    dict) add, lists join, dicts merge key by key; anything else (a flag, a ratio, a `SETTINGS` dict
-    such as the weights a batch used) is the later batch's. A run fanned out in batches then reports
-    its totals, not its last batch's."""
+    """Two batches' details as one run's: counts (ints) add, wall times (a ``seconds`` or ``*_seconds``
+    number, or the numbers of a ``seconds`` dict) add, lists join, dicts merge key by key; anything else
+    (a flag, a ratio, a `SETTINGS` dict such as the weights a batch used) is the later batch's. A run
+    fanned out in batches then reports its totals, not its last batch's."""
     out = dict(a)
     for name, value in b.items():
         if name not in out or name in SETTINGS:
@@ -88,15 +88,23 @@ def merge_details(a: dict[str, Any], b: dict[str, Any], key: str = "") -> dict[s
             out[name] = merge_details(mine, value, name)
         elif isinstance(mine, list) and isinstance(value, list):
             out[name] = mine + value
-        elif _count(mine) and _count(value) and (isinstance(mine, int) and isinstance(value, int) or key == "seconds"):
+        elif _count(mine) and _count(value) and (_is_time(key, name) or _is_int(mine) and _is_int(value)):
             out[name] = mine + value
         else:
             out[name] = value
     return out
 
 
+def _is_time(parent: str, name: str) -> bool:
+    return parent == "seconds" or name == "seconds" or name.endswith("_seconds")
+
+
 def _count(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _plain(obj: Any) -> Any:
