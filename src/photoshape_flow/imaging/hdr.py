@@ -31,10 +31,11 @@ class EnvmapLimits:
     aspect: float = 2.0
     aspect_tolerance: float = 0.02  # relative
     # negative radiance is accepted down to this fraction of the map's 99th-percentile luminance (its
-    # bright end, which lights a scene): lossy EXR compression and resampling ring slightly below 0 near
-    # dark pixels (Blender's bundled HDRIs reach -0.5% of it), and renders clamp at 0; anything deeper
-    # is a wrongly encoded map
+    # bright end, which lights a scene) or `negative_floor`, whichever is lower: lossy EXR compression
+    # and resampling ring slightly below 0 near dark pixels (Blender's bundled HDRIs reach -0.5% of it),
+    # and renders clamp at 0; anything deeper is a wrongly encoded map
     negative_tolerance: float = 0.01
+    negative_floor: float = 1e-6  # absolute: a map whose 99th percentile is black (a lone sun) keeps it
 
 
 @dataclass
@@ -152,7 +153,7 @@ def validate_envmap(path: Path, limits: EnvmapLimits | None = None) -> EnvmapInf
     if peak <= 0:
         raise BadEnvmapError("all black")
     p99 = float(np.percentile(luminance, 99))
-    if low < -limits.negative_tolerance * max(p99, 0.0):
+    if low < -max(limits.negative_tolerance * p99, limits.negative_floor):
         raise BadEnvmapError(f"negative radiance (minimum {low:.3g}, beyond {limits.negative_tolerance:.0%} of "
                              f"the 99th-percentile luminance {p99:.3g})")
     stats = {
