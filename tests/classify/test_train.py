@@ -184,5 +184,12 @@ def test_workers_start_from_a_fork_server_once_a_gpu_is_driven(tmp_path: Path, m
         return result.history[0]["train_loss"]
 
     forked = run()
-    monkeypatch.setattr(train_module, "worker_context", lambda workers, device: "forkserver" if workers else None)
+    asked: list[int] = []
+
+    def fork_server(workers: int, device: Any) -> str | None:
+        asked.append(workers)
+        return "forkserver" if workers else None
+
+    monkeypatch.setattr(train_module, "worker_context", fork_server)
     assert run() == pytest.approx(forked, rel=1e-5)
+    assert asked and all(w == 1 for w in asked)  # the loaders did start their worker from the fork server
