@@ -7,6 +7,7 @@ import pytest
 import sqlalchemy as sa
 from tests.synth.collection import seed_collection
 
+from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.substances import run_substances
@@ -121,8 +122,25 @@ def test_substances_stage_end_to_end_and_idempotent(
     assert after == {r.id: r.updated_at for r in rows}
     assert classifier_after.updated_at == classifier.updated_at
 
+    # the network's BatchNorm prior: chosen on photo-like validation renders once, then read back;
+    # parts labelled under another prior are parts labelled anew
+    choice = summary["bn_prior"]
+    assert again["bn_prior"] == choice and choice["regions"] > 0
+    assert set(choice["log_loss"]) == {"None", "16.0", "4.0", "1.0"}
+    assert classifier_after.metrics["bn_prior_choice"] == choice
+    from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
+    from photoshape_flow.pipeline.substances import assign_part_substances
+
+    network = load_model(checkpoint_from_bytes(store.read_bytes(classifier.checkpoint_blob)))
+    other = 1.0 if choice["bn_prior"] is None else None
+    relabelled = assign_part_substances(get_settings(), classifier.id, network, 32, bn_prior=other)
+    assert relabelled["updated"] == 3 and relabelled["skipped"] == 0
+    with session_scope(db_url) as session:
+        moved = {r.id: r.probs for r in session.execute(sa.select(m.PartSubstance)).scalars()}
+    assert any(moved[r.id] != r.probs for r in rows if r.observed)
+    assert assign_part_substances(get_settings(), classifier.id, network, 32, bn_prior=other)["skipped"] == 3
+
     # the part-level temperature: fit on held-out renders, cached, refit when they change
-    from photoshape_flow.config import get_settings
     from photoshape_flow.pipeline.substances import substance_temperature
 
     settings = get_settings()

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from photoshape_flow.classify import checkpoint as ckpt
+from photoshape_flow.classify.bn_adapt import adapted_batchnorm
 from photoshape_flow.classify.dataset import make_input
 from photoshape_flow.classify.ranking import RankingPolicy
 from photoshape_flow.classify.resnet import MaterialResNet
@@ -65,6 +66,7 @@ class MaterialClassifier:
         device: torch.device | str = "cpu",
         batch_size: int = 32,
         flip: bool = True,
+        bn_prior: float | None = None,
     ):
         self.device = torch.device(device)
         self.model = model.to(self.device).eval()
@@ -73,6 +75,7 @@ class MaterialClassifier:
         self.image_size = int(image_size)
         self.batch_size = int(batch_size)
         self.flip = bool(flip)
+        self.bn_prior = None if bn_prior is None else float(bn_prior)
 
     @property
     def num_materials(self) -> int:
@@ -102,7 +105,9 @@ class MaterialClassifier:
         Column 0 of both is background; material column i is `self.materials[i - 1]`. With `flip`
         (the default) each region is also classified mirrored and the two softmaxes averaged: a
         material does not depend on left and right, training used flips, and the mean of two equally
-        valid views is a steadier estimate for one more forward pass.
+        valid views is a steadier estimate for one more forward pass. With `bn_prior` set, the
+        BatchNorm statistics are mixed with this image's own (`classify.bn_adapt`): the regions of
+        one padded image are one sample, the crops of ``crop="mask"`` one each.
         """
         x = self.inputs(image_rgb, masks, crop)
         mats, subs = [], []
@@ -111,7 +116,8 @@ class MaterialClassifier:
             n = len(batch)
             if self.flip:
                 batch = torch.cat([batch, batch.flip(-1)])
-            mat_logits, sub_logits = self.model(batch)
+            with adapted_batchnorm(self.model, self.bn_prior, 1 if crop == "image" else n) as model:
+                mat_logits, sub_logits = model(batch)
             mat, sub = mat_logits.softmax(1).float().cpu(), sub_logits.softmax(1).float().cpu()
             if self.flip:
                 mat, sub = 0.5 * (mat[:n] + mat[n:]), 0.5 * (sub[:n] + sub[n:])
@@ -129,13 +135,14 @@ class MaterialClassifier:
 
 
 def load_classifier(
-    checkpoint: bytes | str | Path | dict[str, Any], device: torch.device | str = "auto", batch_size: int = 32
+    checkpoint: bytes | str | Path | dict[str, Any], device: torch.device | str = "auto", batch_size: int = 32,
+    bn_prior: float | None = None,
 ) -> MaterialClassifier:
-    """A `MaterialClassifier` from a checkpoint (bytes, file or already-loaded dict)."""
+    """A `MaterialClassifier` from a checkpoint (bytes, file or already-loaded dict); `bn_prior`: see `predict`."""
     data = checkpoint if isinstance(checkpoint, dict) else ckpt.load(checkpoint)
     model = ckpt.build_model(data)
     resolved = resolve_device(device) if isinstance(device, str) else device
     return MaterialClassifier(
         model, data["materials"], data["material_substances"], data["image_size"], device=resolved,
-        batch_size=batch_size,
+        batch_size=batch_size, bn_prior=bn_prior,
     )

@@ -35,6 +35,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from photoshape_flow.classify.bn_adapt import adapted_batchnorm
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.vocab import SUBSTANCE_LABELS
@@ -310,14 +311,16 @@ def train_substance_net(
 
 
 @torch.inference_mode()
-def predict_substances(model: SubstanceNet, image_rgb: np.ndarray, size: int, flip: bool = True) -> np.ndarray:
+def predict_substances(model: SubstanceNet, image_rgb: np.ndarray, size: int, flip: bool = True,
+                       bn_prior: float | None = None) -> np.ndarray:
     """Per-pixel substance probabilities (6, H, W) float32 at the image's own resolution.
 
     The image (H, W, 3; uint8, uint16 or float in [0, 1]) is resized to size x size for the network and the
     softmax is resized back bilinearly (a convex combination, so each pixel still sums to 1). With
     `flip` the softmax is averaged with that of the mirrored image (mirrored back): substances do not
     depend on left and right, and the network was trained with flips, so the two views are equally
-    valid and their mean is a less noisy estimate, for one more forward pass.
+    valid and their mean is a less noisy estimate, for one more forward pass. `bn_prior`: BatchNorm
+    statistics mixed with this image's own (`classify.bn_adapt`; None: as trained).
     """
     image = np.asarray(image_rgb)
     if image.ndim == 2:
@@ -338,7 +341,8 @@ def predict_substances(model: SubstanceNet, image_rgb: np.ndarray, size: int, fl
     was_training = model.training
     model.eval()
     views = [resized, resized[:, ::-1]] if flip else [resized]
-    logits = model(_to_tensor([np.ascontiguousarray(v) for v in views]).to(device))
+    with adapted_batchnorm(model, bn_prior, 1) as adapted:
+        logits = adapted(_to_tensor([np.ascontiguousarray(v) for v in views]).to(device))
     model.train(was_training)
     probs = torch.softmax(logits, dim=1)
     if flip:

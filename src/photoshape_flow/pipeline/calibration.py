@@ -127,6 +127,7 @@ def substance_networks(session: Session) -> list[int]:
 
 def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
     """Fit (or confirm the cached) colour sigma of a material classifier and every substance temperature."""
+    from photoshape_flow.pipeline.bn_prior import choose_bn_prior
     from photoshape_flow.pipeline.substances import substance_temperature
 
     store = BlobStore(settings.blob_root)
@@ -138,7 +139,8 @@ def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
         sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
         networks = substance_networks(session)
     temperatures = {str(n): substance_temperature(settings, n) for n in networks}
-    return {"color_sigma": sigma, "substance_temperatures": temperatures,
+    bn_prior = choose_bn_prior(settings, classifier_id)
+    return {"color_sigma": sigma, "substance_temperatures": temperatures, "bn_prior": bn_prior,
             "posterior": posterior_reliability(settings, classifier_id)}
 
 
@@ -153,6 +155,7 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     checkpoint, the renders and the sigma, so a re-run of training that changes none reads them back.
     """
     from photoshape_flow.classify.reliability import reliability
+    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
     from photoshape_flow.pipeline.training import load_material_classifier, training_data
 
     store = BlobStore(settings.blob_root)
@@ -165,7 +168,8 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
         assert classifier is not None
         metrics = dict(classifier.metrics or {})
         key = stable_hash({"checkpoint": row.checkpoint_blob, "renders": data.hash, "limit": limit,
-                           "sigma": metrics.get("color_sigma")})
+                           "sigma": metrics.get("color_sigma"),
+                           **({"bn_prior": prior} if (prior := stored_bn_prior(classifier)) is not None else {})})
         if metrics.get("posterior_key") == key and "posterior_reliability" in metrics:
             return dict(metrics["posterior_reliability"])
         prior = stored_color_prior(session, store, model.materials, classifier)

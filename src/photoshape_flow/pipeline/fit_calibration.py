@@ -247,11 +247,19 @@ def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:
 
 
 def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int, photo_size: int | None = None) -> str:
-    """What a stored calibration depends on (a change of any re-fits it)."""
+    """What a stored calibration depends on (a change of any re-fits it).
+
+    The classifier's BatchNorm prior changes how it ranks the cases (`RenderRanker`); it enters only
+    when one is chosen, so calibrations of classifiers that read photos as trained keep their keys.
+    """
+    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
+
+    prior = stored_bn_prior(ctx.classifier)
     return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
                         "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed, "photo_size": photo_size,
                         "renders": [[r.kind, r.key, r.params_hash] for r in renders],
-                        "materials": sorted(ctx.material_substance), "envmaps": sorted(ctx.envmaps.items())})
+                        "materials": sorted(ctx.material_substance), "envmaps": sorted(ctx.envmaps.items()),
+                        **({} if prior is None else {"bn_prior": prior})})
 
 
 def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering],

@@ -163,6 +163,7 @@ class _Context:
         self.available_substances = {sub for _, sub in self.materials}
         self.classifier = classifier
         self.model = None
+        self.bn_prior: float | None = None
         self.min_region_fraction = 0.0
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
@@ -171,7 +172,11 @@ class _Context:
             from photoshape_flow.devices import set_torch_threads
 
             set_torch_threads(settings.torch_threads)
-            self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device)
+            from photoshape_flow.pipeline.bn_prior import stored_bn_prior
+
+            self.bn_prior = stored_bn_prior(classifier)
+            self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device,
+                                         bn_prior=self.bn_prior)
             from photoshape_flow.classify.configs import ClassifierConfig
 
             # the smallest region (share of the image) the classifier trained on: below it the head's
@@ -215,6 +220,8 @@ class _Context:
             "color_sigma": None if self.color_sigma is None else round(self.color_sigma, 4),
             "substance_temperatures": {str(k): None if v is None else round(v, 4)
                                        for k, v in sorted(self.substance_temperatures.items())},
+            # only when chosen: rows ranked without adaptation keep their hashes
+            **({} if self.bn_prior is None else {"bn_prior": self.bn_prior}),
         }
 
     def substance_weights(self, view: PartSubstanceView) -> np.ndarray:

@@ -224,6 +224,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
         load_model,
         predict_substances,
     )
+    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
 
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
@@ -233,7 +234,9 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
             return None
         metrics = dict(row.metrics or {})
         renders = calibration_renders(session)
-        cache_key = stable_hash([row.checkpoint_blob, [key for key, _ in renders]])
+        bn_prior = stored_bn_prior(row)  # the parts were labelled with it: calibrate what they saw
+        cache_key = stable_hash([row.checkpoint_blob, [key for key, _ in renders],
+                                 *([] if bn_prior is None else [bn_prior])])
         if metrics.get("part_temperature_key") == cache_key:
             value = metrics.get("part_temperature")
             return None if value is None else float(value)
@@ -246,7 +249,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
             image = store.load_image(blobs["beauty"])
             part_ids = _load_label_map(store, blobs["part_ids"]).astype(np.int64)
             substance_ids = _load_label_map(store, blobs["substance_ids"]).astype(np.int64)
-            probs = predict_substances(model, image[..., :3], size)
+            probs = predict_substances(model, image[..., :3], size, bn_prior=bn_prior)
             if probs.shape[1:] != part_ids.shape:
                 probs = _resize_probs(probs, part_ids.shape)
         except (KeyError, OSError, ValueError) as exc:
@@ -275,9 +278,13 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
 
 def assign_part_substances(
     settings: Settings, classifier_id: int, model: Any, size: int, *, min_pixels: int = 1,
-    progress: Progress | None = None,
+    bn_prior: float | None = None, progress: Progress | None = None,
 ) -> dict[str, Any]:
-    """PartSubstance rows for every pair with an ok flow-crf alignment (skipping up-to-date pairs)."""
+    """PartSubstance rows for every pair with an ok flow-crf alignment (skipping up-to-date pairs).
+
+    `bn_prior`: the network reads each photo with its BatchNorm statistics mixed with the photo's
+    (`classify.bn_adapt`, chosen by `pipeline.bn_prior`; None: as trained).
+    """
     from photoshape_flow.classify.substance_parts import part_substances
     from photoshape_flow.classify.substance_train import predict_substances
 
@@ -314,7 +321,8 @@ def assign_part_substances(
         parts = parts_of.get(shape_id, [])
         params_hash = stable_hash(
             {"rule": RULE_VERSION, "classifier": checkpoint_ref, "size": size, "min_pixels": min_pixels,
-             "part_map": crf_blob, "alignment": alignment_hash, "image": image_blob}
+             "part_map": crf_blob, "alignment": alignment_hash, "image": image_blob,
+             **({} if bn_prior is None else {"bn_prior": bn_prior})}
         )
         have = current.get(pair_id, {})
         if parts and all(have.get(part_id) == params_hash for part_id, _ in parts):
@@ -327,7 +335,7 @@ def assign_part_substances(
             image = store.load_image(image_blob)
             if image.ndim == 2:
                 image = np.repeat(image[..., None], 3, axis=2)
-            probs = predict_substances(model, image[..., :3], size)
+            probs = predict_substances(model, image[..., :3], size, bn_prior=bn_prior)
             if probs.shape[1:] != part_map.shape:
                 probs = _resize_probs(probs, part_map.shape)
             results = part_substances(part_map, probs, [index for _, index in parts], min_pixels=min_pixels)
@@ -400,10 +408,14 @@ def train_and_assign(settings: Settings, size: int, train_config: str | Substanc
                      train_overrides: dict[str, Any] | None = None,
                      progress: Progress | None = None) -> dict[str, Any]:
     """The network on the bootstrap renders that exist (trained or resumed), then every part's substance."""
+    from photoshape_flow.pipeline.bn_prior import choose_substance_bn_prior
+
     classifier_id, model, info = train_or_resume(settings, train_config, progress=progress, **(train_overrides or {}))
     predict_size = _config_size(settings, classifier_id) or size
-    parts = assign_part_substances(settings, classifier_id, model, predict_size, progress=progress)
-    return {"network": info, "part_substances": parts}
+    choice = choose_substance_bn_prior(settings, classifier_id, model, predict_size)
+    parts = assign_part_substances(settings, classifier_id, model, predict_size, bn_prior=choice["bn_prior"],
+                                   progress=progress)
+    return {"network": info, "bn_prior": choice, "part_substances": parts}
 
 
 def _config_size(settings: Settings, classifier_id: int) -> int | None:

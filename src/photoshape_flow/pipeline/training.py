@@ -143,8 +143,12 @@ def newest_material_classifier(session: Session) -> Classifier | None:
 def load_material_classifier(
     classifier_id: int | None = None, settings: Settings | None = None, device: str | None = None
 ) -> tuple[Classifier, Any]:
-    """(row, `MaterialClassifier`) for `classifier_id` or the newest ok material classifier."""
+    """(row, `MaterialClassifier`) for `classifier_id` or the newest ok material classifier.
+
+    The model reads photos with the BatchNorm prior chosen for it (`pipeline.bn_prior`), if any.
+    """
     from photoshape_flow.classify.infer import load_classifier
+    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
 
     settings = settings or get_settings()
     with session_scope(settings.resolved_database_url) as session:
@@ -160,7 +164,8 @@ def load_material_classifier(
                 raise LookupError(f"classifier {classifier_id}: status {row.status}, not usable")
         session.expunge(row)
     store = BlobStore(settings.blob_root)
-    return row, load_classifier(store.read_bytes(row.checkpoint_blob), device=device or settings.device)
+    return row, load_classifier(store.read_bytes(row.checkpoint_blob), device=device or settings.device,
+                                bn_prior=stored_bn_prior(row))
 
 
 def _parent_candidate(

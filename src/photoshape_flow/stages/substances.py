@@ -34,7 +34,7 @@ def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) 
         return _bootstrap(ctx, cfg, work)
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
                              train_config=cfg.network, progress=ctx.progress)
-    return _report(summary["part_substances"], summary["network"], summary["bootstrap"])
+    return _report(summary, summary["bootstrap"])
 
 
 def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
@@ -42,7 +42,7 @@ def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
     from photoshape_flow.pipeline.substances import train_and_assign
 
     summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network, progress=ctx.progress)
-    return _report(summary["part_substances"], summary["network"], None)
+    return _report(summary, None)
 
 
 def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> StageReport:
@@ -55,8 +55,10 @@ def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> Stag
                        failed=int(renders["failed"]), rejected=int(renders["rejected"]), details={"bootstrap": counts})
 
 
-def _report(parts: dict[str, Any], network: Any, renders: dict[str, Any] | None) -> StageReport:
-    details: dict[str, Any] = {"network": network, "parts": parts["parts"], "unobserved": parts["unobserved"]}
+def _report(summary: dict[str, Any], renders: dict[str, Any] | None) -> StageReport:
+    parts = summary["part_substances"]
+    details: dict[str, Any] = {"network": summary["network"], "bn_prior": summary.get("bn_prior"),
+                               "parts": parts["parts"], "unobserved": parts["unobserved"]}
     if renders is not None:
         details["bootstrap"] = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}
     return StageReport(NAME, done=int(parts["updated"]), skipped=int(parts["skipped"]), failed=int(parts["failed"]),
