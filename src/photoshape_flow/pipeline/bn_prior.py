@@ -6,7 +6,8 @@ ranking: on the collection's validation renders (val shapes, val envmaps), each 
 exemplar at the exemplars' size (`fit_calibration.as_photo`: exposure, white balance, blur, noise,
 JPEG) with its part map misaligned as fine alignment errs, never on exemplars or evaluation worlds.
 The candidate with the lowest mean log-loss of the truth, after its own maximum-likelihood
-temperature (`tempered_log_loss`), wins; no adaptation (None) keeps ties:
+temperature (`region_losses`), wins if it beats no adaptation beyond noise (a paired bootstrap over
+the renders, `choose`); otherwise the network reads photos as trained:
 
 - the material classifier: the true material under the material head over the enabled materials,
   chosen by the training stage's calibration, read by inference, fit's calibration and `retrieve`;
@@ -87,15 +88,15 @@ def photo_cases(session: sa.orm.Session, store: BlobStore, settings: Settings, c
     return out
 
 
-Readings = tuple[np.ndarray, np.ndarray]  # probabilities (R, C) per scored region, true column (R,)
+Readings = tuple[np.ndarray, np.ndarray, np.ndarray]  # probabilities (R, C), true column (R,), case index (R,)
 
 
 def material_readings(model: Any, cases: list[PhotoCase], enabled: set[int]) -> Readings:
-    """The material head over the enabled materials (renormalised) per scored region, and the true column."""
+    """The material head over the enabled materials (renormalised) per scored region, the true column, the case."""
     columns = np.array([i + 1 for i, mid in enumerate(model.materials) if mid in enabled])
     ids = np.asarray(model.materials)[columns - 1]
-    probs, truth = [], []
-    for case in cases:
+    probs, truth, group = [], [], []
+    for c, case in enumerate(cases):
         mats, _ = model.predict(case.image, list(case.masks))
         p = mats[:, columns]
         p = p / np.maximum(p.sum(1, keepdims=True), 1e-12)
@@ -104,33 +105,58 @@ def material_readings(model: Any, cases: list[PhotoCase], enabled: set[int]) -> 
             if len(where):
                 probs.append(p[k])
                 truth.append(int(where[0]))
-    return np.asarray(probs).reshape(len(probs), len(columns)), np.asarray(truth, np.int64)
+                group.append(c)
+    return (np.asarray(probs).reshape(len(probs), len(columns)), np.asarray(truth, np.int64),
+            np.asarray(group, np.int64))
 
 
-def tempered_log_loss(readings: Readings) -> float | None:
-    """Mean -log p(truth) after the readings' own maximum-likelihood temperature (None: nothing read).
+def region_losses(readings: Readings) -> np.ndarray:
+    """-log p(truth) per region after the readings' own maximum-likelihood temperature.
 
     Tempered first because adaptation also flattens or sharpens a network's confidence, and the
     ranking re-calibrates confidence anyway (posterior, part temperature): what the prior should win
     on is how well the truth is told apart, not how confident the network happens to be.
     """
-    from photoshape_flow.classify.substance_calibration import fit_temperature, nll
+    from photoshape_flow.classify.substance_calibration import fit_temperature
 
-    probs, truth = readings
+    probs, truth, _ = readings
     if not len(truth):
+        return np.zeros(0)
+    z = np.log(np.maximum(np.asarray(probs, np.float64), 1e-12)) / (fit_temperature(probs, truth) or 1.0)
+    z = z - z.max(axis=1, keepdims=True)
+    return np.log(np.exp(z).sum(axis=1)) - z[np.arange(len(truth)), truth]
+
+
+def tempered_log_loss(readings: Readings) -> float | None:
+    """The mean of `region_losses` (None: nothing read)."""
+    losses = region_losses(readings)
+    return float(losses.mean()) if len(losses) else None
+
+
+def choose(losses: dict[float | None, np.ndarray], groups: np.ndarray, draws: int = 2000) -> float | None:
+    """The prior of lowest mean loss among those that beat no adaptation beyond noise, else None.
+
+    `losses`: per-region losses of each candidate on the same regions; `groups`: each region's case
+    (validation render). A candidate counts only when the 95% bootstrap interval of its mean loss
+    minus no adaptation's, resampling whole renders, lies below 0: a few dozen renders cannot tell
+    small differences from chance, and a prior adopted on chance would re-label every part for
+    nothing.
+    """
+    base = losses.get(None)
+    if base is None or not len(base):
         return None
-    return nll(probs, truth, fit_temperature(probs, truth) or 1.0)
-
-
-def choose(losses: dict[float | None, float | None]) -> float | None:
-    """The candidate of lowest loss; None (no adaptation) wins ties and when nothing was measured."""
+    keys, index = np.unique(np.asarray(groups), return_inverse=True)
+    rng = np.random.default_rng(0)
+    picks = rng.integers(0, len(keys), (draws, len(keys)))
+    counts = np.stack([np.bincount(row, minlength=len(keys)) for row in picks])[:, index]  # (draws, regions)
     best: float | None = None
-    best_loss = losses.get(None)
-    if best_loss is None:
-        return None
-    for prior, loss in losses.items():
-        if prior is not None and loss is not None and loss < best_loss - 1e-9:
-            best, best_loss = prior, loss
+    best_loss = float(base.mean())
+    for prior, values in losses.items():
+        if prior is None or len(values) != len(base) or float(values.mean()) >= best_loss:
+            continue
+        diff = (counts * (values - base)).sum(1) / np.maximum(counts.sum(1), 1)
+        if np.percentile(diff, 97.5) < 0:
+            best, best_loss = prior, float(values.mean())
     return best
 
 
@@ -151,18 +177,20 @@ def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS
 
 def substance_readings(network: Any, size: int, cases: list[PhotoCase], substance_of: dict[int, str],
                        prior: float | None) -> Readings:
-    """Each scored part's mean substance probability (background left out, renormalised), and the truth."""
+    """Each scored part's mean substance probability (background left out, renormalised), the truth, the case."""
     from photoshape_flow.classify.substance_train import predict_substances
     from photoshape_flow.vocab import SUBSTANCE_LABELS
 
-    probs, truth = [], []
-    for case in cases:
+    probs, truth, group = [], [], []
+    for c, case in enumerate(cases):
         pixels = predict_substances(network, case.image, size, bn_prior=prior)
         for mask, true in zip(case.masks, case.truth, strict=True):
             mean = pixels[1:, mask].mean(1)
             probs.append(mean / max(float(mean.sum()), 1e-12))
             truth.append(SUBSTANCE_LABELS.index(substance_of[true]) - 1)
-    return np.asarray(probs).reshape(len(probs), len(SUBSTANCE_LABELS) - 1), np.asarray(truth, np.int64)
+            group.append(c)
+    return (np.asarray(probs).reshape(len(probs), len(SUBSTANCE_LABELS) - 1), np.asarray(truth, np.int64),
+            np.asarray(group, np.int64))
 
 
 def choose_substance_bn_prior(settings: Settings, network_id: int, network: Any, size: int,
@@ -188,15 +216,15 @@ def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | Non
         metrics = dict(row.metrics or {}) if row is not None else {}
         renders = sorted(r.key for r in _renders(session, count, settings))
         key = stable_hash({"checkpoint": checkpoint, "renders": renders, "candidates": CANDIDATES,
-                           "seed": settings.seed, "rule": "tempered"})
+                           "seed": settings.seed, "rule": "tempered, beyond noise"})
         if metrics.get("bn_prior_key") == key and "bn_prior_choice" in metrics:
             return dict(metrics["bn_prior_choice"])
         cases = photo_cases(session, store, settings, count)
     readings = {prior: read(prior, cases) for prior in CANDIDATES}
-    losses = {prior: tempered_log_loss(r) for prior, r in readings.items()}
-    chosen = choose(losses)
-    result = {"bn_prior": chosen, "regions": int(len(readings[None][1])),
-              "log_loss": {str(p): None if v is None else round(v, 4) for p, v in losses.items()},
+    losses = {prior: region_losses(r) for prior, r in readings.items()}
+    chosen = choose(losses, readings[None][2])
+    result = {"bn_prior": chosen, "regions": int(len(readings[None][1])), "renders": len(cases),
+              "log_loss": {str(p): round(float(v.mean()), 4) if len(v) else None for p, v in losses.items()},
               "top1": {str(p): round(float((r[0].argmax(1) == r[1]).mean()), 4) if len(r[1]) else None
                        for p, r in readings.items()}}
     log.info("network %d: BatchNorm prior %s chosen on %d photo-like validation regions (log-loss %s)",
