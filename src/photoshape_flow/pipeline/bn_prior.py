@@ -33,6 +33,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.pipeline.fit_calibration import validation_renders
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -61,18 +62,18 @@ def clean_photo(hdr: np.ndarray, ids: np.ndarray) -> np.ndarray:
 
 
 def photo_cases(session: sa.orm.Session, store: BlobStore, settings: Settings, count: int,
-                degrade: bool = True) -> list[PhotoCase]:
+                degrade: bool = True, kinds: tuple[str, ...] = ("training", "bootstrap")) -> list[PhotoCase]:
     """Up to `count` validation renders, degraded and misaligned deterministically (seed and render key).
 
     `degrade=False`: the clean render with its exact part map (the classifier's own domain).
     """
     from photoshape_flow.fit.validation import misalign, resampled, sample_misalignment
-    from photoshape_flow.pipeline.fit_calibration import as_photo, exemplar_size, validation_renders
+    from photoshape_flow.pipeline.fit_calibration import as_photo, exemplar_size
     from photoshape_flow.synth.spec import RenderSpec
 
     size = exemplar_size(session)
     out = []
-    for row in validation_renders(session, count, settings.seed):
+    for row in validation_renders(session, count, settings.seed, kinds):
         truth = RenderSpec.from_dict(row.params).material_by_index()
         hdr, ids = store.load_image(row.blobs["hdr"]), store.load_image(row.blobs["part_ids"])
         ids = ids[..., 0] if ids.ndim == 3 else ids
@@ -204,22 +205,25 @@ def choose_substance_bn_prior(settings: Settings, network_id: int, network: Any,
     def readings(prior: float | None, cases: list[PhotoCase]) -> Readings:
         return substance_readings(network, size, cases, substance_of, prior)
 
-    return _choose_and_store(settings, network_id, checkpoint, count, readings)
+    # the bootstrap round's renders only: those are what exist when the stage first chooses, so a
+    # re-run after the training round's renders exist reads the same ones and keeps the choice
+    return _choose_and_store(settings, network_id, checkpoint, count, readings, kinds=("bootstrap",))
 
 
 def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | None, count: int,
-                      read: Callable[[float | None, list[PhotoCase]], Readings]) -> dict[str, Any]:
+                      read: Callable[[float | None, list[PhotoCase]], Readings],
+                      kinds: tuple[str, ...] = ("training", "bootstrap")) -> dict[str, Any]:
     store = BlobStore(settings.blob_root)
     url = settings.resolved_database_url
     with session_scope(url) as session:
         row = session.get(m.Classifier, network_id)
         metrics = dict(row.metrics or {}) if row is not None else {}
-        renders = sorted(r.key for r in _renders(session, count, settings))
+        renders = sorted(f"{r.kind}/{r.key}" for r in validation_renders(session, count, settings.seed, kinds))
         key = stable_hash({"checkpoint": checkpoint, "renders": renders, "candidates": CANDIDATES,
                            "seed": settings.seed, "rule": "tempered, beyond noise"})
         if metrics.get("bn_prior_key") == key and "bn_prior_choice" in metrics:
             return dict(metrics["bn_prior_choice"])
-        cases = photo_cases(session, store, settings, count)
+        cases = photo_cases(session, store, settings, count, kinds=kinds)
     readings = {prior: read(prior, cases) for prior in CANDIDATES}
     losses = {prior: region_losses(r) for prior, r in readings.items()}
     chosen = choose(losses, readings[None][2])
@@ -234,12 +238,6 @@ def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | Non
         if row is not None and row.checkpoint_blob == checkpoint:
             row.metrics = {**(row.metrics or {}), "bn_prior_choice": result, "bn_prior_key": key}
     return result
-
-
-def _renders(session: sa.orm.Session, count: int, settings: Settings) -> list[m.Rendering]:
-    from photoshape_flow.pipeline.fit_calibration import validation_renders
-
-    return validation_renders(session, count, settings.seed)
 
 
 def stored_bn_prior(classifier: m.Classifier | None) -> float | None:

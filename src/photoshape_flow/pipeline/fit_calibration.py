@@ -93,10 +93,11 @@ def with_blur(ctx: Any, blur: float) -> Any:
     return other
 
 
-def validation_renders(session: sa.orm.Session, count: int, seed: int) -> list[m.Rendering]:
-    """Up to `count` ok, non-excluded validation renders, a deterministic sample by seed and key."""
+def validation_renders(session: sa.orm.Session, count: int, seed: int,
+                       kinds: Sequence[str] = KINDS) -> list[m.Rendering]:
+    """Up to `count` ok, non-excluded validation renders of `kinds`, a deterministic sample by seed and key."""
     rows = session.execute(
-        sa.select(m.Rendering).where(m.Rendering.kind.in_(KINDS), m.Rendering.split == "val",
+        sa.select(m.Rendering).where(m.Rendering.kind.in_(list(kinds)), m.Rendering.split == "val",
                                      m.Rendering.status == STATUS_OK, m.Rendering.exclude.is_(False))
     ).scalars().all()
     rows = [r for r in rows if {"hdr", "part_ids"} <= set(r.blobs or {}) and r.shape_id is not None]
