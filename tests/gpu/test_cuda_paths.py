@@ -57,6 +57,7 @@ from photoshape_flow.classify.configs import AugmentConfig
 from photoshape_flow.classify.configs import get_config as classifier_config
 from photoshape_flow.classify.dataset import RegionDataset, find_regions
 from photoshape_flow.classify.infer import load_classifier
+from photoshape_flow.classify.networks import build_network
 from photoshape_flow.classify.resnet import build_model
 from photoshape_flow.classify.substance_configs import get_config as substance_config
 from photoshape_flow.classify.substance_net import NUM_CLASSES
@@ -156,12 +157,14 @@ def _compare_predictions(on_device, on_cpu, image, masks, label: str) -> None:  
         assert (mat_d[clear, 1:].argmax(1) == mat_c[clear, 1:].argmax(1)).all()
 
 
-def test_material_classifier_trains_resumes_and_infers_on_device(tmp_path: Path, device: str) -> None:
+@pytest.mark.parametrize("arch", ["resnet18", "efficientnet-lite0"])
+def test_material_classifier_trains_resumes_and_infers_on_device(tmp_path: Path, device: str, arch: str) -> None:
+    """Both network families: the from-scratch ResNet and the part recogniser on its ImageNet backbone."""
     train, val = _region_sets(tmp_path)
-    config = classifier_config("tiny", epochs=2, batch_size=8, max_steps_per_epoch=3)
+    config = classifier_config("tiny", epochs=2, batch_size=8, max_steps_per_epoch=3, arch=arch, crop_size=64)
     saved: list[dict] = []
     result = train_classifier(
-        build_model(config.arch, len(MATERIALS), width=config.width, seed=0), train, val, config,
+        build_network(config, len(MATERIALS), seed=0), train, val, config,
         materials=MATERIALS, material_substances=SUBSTANCES, device=device, save=saved.append,
     )
     assert result.epoch == 2 and [c["epoch"] for c in saved] == [1, 2]
@@ -192,7 +195,7 @@ def test_material_classifier_trains_resumes_and_infers_on_device(tmp_path: Path,
     if device.startswith("cuda"):  # the default, settings.device = "auto", picks the GPU
         assert load_classifier(blob).device.type == "cuda"
     image, masks = _photo_and_masks()
-    _compare_predictions(on_device, on_cpu, image, masks, "tiny")
+    _compare_predictions(on_device, on_cpu, image, masks, arch)
 
 
 def test_material_classifier_paper_options_on_device(tmp_path: Path, device: str) -> None:

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 
+import cv2
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -152,4 +154,34 @@ def augment(
     assert out_image is not None and out_mask is not None
     if config.brightness or config.contrast or config.saturation or config.hue:
         out_image = color_jitter(out_image, config, generator)
+    out_image = photo_degradation(out_image, config, generator)
     return out_image.clamp(0.0, 1.0), out_mask
+
+
+def photo_degradation(image: torch.Tensor, config: AugmentConfig, generator: torch.Generator) -> torch.Tensor:
+    """White balance, sensor noise and JPEG compression of a (3, H, W) image in [0, 1], each if enabled.
+
+    The ranges follow what a product photo shows and a clean render does not (the demo's exemplar
+    degradation, `demo.exemplars.sample_degradation`, is of the same kind; the ranges here are wider,
+    as another camera's are).
+    """
+    if config.white_balance:
+        gains = torch.exp(torch.randn(3, generator=generator, dtype=image.dtype) * config.white_balance)
+        image = (image * (gains / (gains * torch.tensor([0.2126, 0.7152, 0.0722])).sum()).view(3, 1, 1)).clamp(0, 1)
+    if config.noise:
+        sigma = _uniform(generator, 0.0, config.noise) / 255.0
+        image = (image + torch.randn(image.shape, generator=generator, dtype=image.dtype) * sigma).clamp(0, 1)
+    if config.jpeg_quality:
+        quality = int(_uniform(generator, config.jpeg_quality, 95.0))
+        image = jpeg_roundtrip(image, quality)
+    return image
+
+
+def jpeg_roundtrip(image: torch.Tensor, quality: int) -> torch.Tensor:
+    """A (3, H, W) image in [0, 1] encoded as JPEG at `quality` and decoded again."""
+    rgb = (image.permute(1, 2, 0).numpy() * 255.0 + 0.5).astype(np.uint8)
+    ok, buffer = cv2.imencode(".jpg", np.ascontiguousarray(rgb[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    decoded = cv2.imdecode(buffer, cv2.IMREAD_COLOR)[..., ::-1]
+    return torch.from_numpy(np.ascontiguousarray(decoded)).permute(2, 0, 1).to(image.dtype) / 255.0

@@ -3,7 +3,7 @@
 A checkpoint is a plain dict saved with `torch.save` and read back with ``weights_only=True``
 (tensors, numbers, strings, lists and dicts only, so loading one never runs code):
 
-* ``format``, ``kind`` ("material"), ``model_spec`` (MaterialResNet constructor arguments),
+* ``format``, ``kind`` ("material"), ``model_spec`` (the network's constructor arguments, `classify.networks`),
   ``model`` (state dict), ``materials`` (material ids in head order, without background),
   ``material_substances`` (substance name per material), ``image_size``, ``config`` (the training
   config as a dict), ``epoch`` (epochs completed), ``history`` (per-epoch metrics);
@@ -20,14 +20,14 @@ from typing import Any
 
 import torch
 
-from photoshape_flow.classify.resnet import MaterialResNet
+from photoshape_flow.classify.networks import MaterialNetwork, network_from_spec
 
 FORMAT = 1
 RESUME_KEYS = ("optimizer", "loss", "rng")
 
 
 def make_checkpoint(
-    model: MaterialResNet,
+    model: MaterialNetwork,
     *,
     materials: Sequence[int],
     material_substances: Sequence[str],
@@ -97,8 +97,8 @@ def load(source: bytes | str | Path) -> dict[str, Any]:
     return checkpoint
 
 
-def build_model(checkpoint: dict[str, Any]) -> MaterialResNet:
+def build_model(checkpoint: dict[str, Any]) -> MaterialNetwork:
     """The network of a checkpoint with its weights loaded (train mode; callers pick eval)."""
-    model = MaterialResNet(**checkpoint["model_spec"])
+    model = network_from_spec(checkpoint["model_spec"])
     model.load_state_dict(checkpoint["model"])
     return model

@@ -17,6 +17,9 @@
 ``frame_object`` (cut each training render to the square around its object, as exemplars are cut)
 and ``augment.blur`` (a random blur against the renders' sampling noise) stay off in every
 configuration: together they measured worse on the exemplars (docs/decisions.md, D4).
+* ``backbone``: the part recogniser (`classify.part_net`): ImageNet EfficientNet-Lite0 over a 160 px
+  crop of the part, stages 4-7 fine-tuned at a tenth of the heads' step, photo-like augmentation
+  (white balance, blur, noise, JPEG) on top of the geometric and colour ones (docs/decisions.md, D53).
 * ``paper``: section 5.2 as published. ResNet-34 at 224 px, SGD with a fixed learning rate of 1e-4,
   momentum 0.9, weight decay 1e-4 (never on the log-variances), uncertainty-weighted loss with
   s_m = 0, s_s = -1, about 100 epochs, the last epoch kept; ImageNet weights when `pretrained` names a torchvision
@@ -53,6 +56,10 @@ class AugmentConfig:
     saturation: float = 0.2
     hue: float = 0.05  # fraction of a full turn of the hue circle
     blur: float = 0.0  # maximum Gaussian sigma in source pixels (0: off, as in the paper)
+    # photo-like degradations (0: off, as in the paper): what a product photo shows and a clean render not
+    white_balance: float = 0.0  # std of the log gain per channel (a camera's white balance)
+    noise: float = 0.0  # maximum sensor-noise sigma, in 8-bit levels
+    jpeg_quality: int = 0  # lowest JPEG quality drawn (up to 95); 0: never compressed
     min_mask_kept: float = 0.25
     max_tries: int = 4
 
@@ -89,6 +96,12 @@ class ClassifierConfig:
     num_workers: int = 0
     channels_last: bool = False
     seed: int = 0
+    # the part recogniser (arch "efficientnet-lite0" / "efficientnet-lite2", `classify.part_net`) only
+    crop_size: int = 160  # the part crop's side as the backbone reads it
+    crop_context: float = 0.25  # context around the part's bounding box, a fraction of its side
+    isolate_part: bool = True  # paint pixels outside the part white before the backbone
+    train_from_stage: int = 4  # stages below stay frozen at their ImageNet weights
+    backbone_lr_scale: float = 0.1  # step of the fine-tuned blocks relative to the new heads
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -110,7 +123,14 @@ class ClassifierConfig:
         return dataclasses.replace(self, **changes)
 
     @property
+    def uses_backbone(self) -> bool:
+        """True for the part recogniser on a pretrained backbone (`classify.part_net`)."""
+        return self.arch.startswith("efficientnet-lite")
+
+    @property
     def architecture(self) -> str:
+        if self.uses_backbone:
+            return f"{self.arch}-part{self.crop_size}"
         return self.arch if self.width == 64 else f"{self.arch}-w{self.width}"
 
 
@@ -146,6 +166,25 @@ CONFIGS: dict[str, ClassifierConfig] = {
         select_metric="mtl@1",
         weight_decay=1e-4,
         augment=AugmentConfig(hue=0.02, saturation=0.15),
+        eval_batch_size=64,
+    ),
+    "backbone": ClassifierConfig(
+        name="backbone",
+        arch="efficientnet-lite0",
+        image_size=128,  # the frame's scale: a photo's part keeps about a render part's pixel count
+        crop_size=160,
+        batch_size=32,
+        epochs=6,
+        finetune_epochs=2,
+        max_steps_per_epoch=30,
+        optimizer="adam",
+        lr=1e-3,
+        backbone_lr_scale=0.1,
+        lr_schedule="cosine",
+        select_metric="mtl@1",
+        weight_decay=1e-4,
+        augment=AugmentConfig(hue=0.02, saturation=0.15, blur=1.0, white_balance=0.05, noise=3.0,
+                              jpeg_quality=70),
         eval_batch_size=64,
     ),
     "paper": ClassifierConfig(

@@ -23,8 +23,8 @@ import torch
 from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.bn_adapt import adapted_batchnorm
 from photoshape_flow.classify.dataset import make_input
+from photoshape_flow.classify.networks import MaterialNetwork
 from photoshape_flow.classify.ranking import RankingPolicy
-from photoshape_flow.classify.resnet import MaterialResNet
 from photoshape_flow.devices import resolve_device
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -59,7 +59,7 @@ class MaterialClassifier:
 
     def __init__(
         self,
-        model: MaterialResNet,
+        model: MaterialNetwork,
         materials: Sequence[int],
         material_substances: Sequence[str],
         image_size: int,

@@ -18,6 +18,9 @@ SUBSTANCE_ARCHITECTURE = "substance-unet-res"
 @dataclass(frozen=True)
 class SubstanceTrainConfig:
     preset: str = "cpu"
+    # "unet": the from-scratch segmentation network; a backbone name ("efficientnet-lite0"): the part
+    # recogniser (`classify.part_net`) trained on the bootstrap round's parts, its substance head read
+    arch: str = "unet"
     size: int = 128
     width: int = 16
     epochs: int = 30
@@ -36,8 +39,12 @@ class SubstanceTrainConfig:
     device: str = "cpu"
 
     @property
+    def uses_backbone(self) -> bool:
+        return self.arch != "unet"
+
+    @property
     def architecture(self) -> str:
-        return f"{SUBSTANCE_ARCHITECTURE}-w{self.width}"
+        return f"{SUBSTANCE_ARCHITECTURE}-w{self.width}" if not self.uses_backbone else self.arch
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -57,6 +64,11 @@ PRESETS: dict[str, SubstanceTrainConfig] = {
     "tiny": SubstanceTrainConfig(preset="tiny", size=32, width=8, epochs=2, batch_size=4, iters_per_epoch=3),
     "cpu": SubstanceTrainConfig(preset="cpu", size=128, width=16, epochs=30, batch_size=16),
     "gpu": SubstanceTrainConfig(preset="gpu", size=192, width=32, epochs=60, batch_size=64, lr=3e-3, device="cuda"),
+    # the part recogniser: epochs of at most `iters_per_epoch` batches over the bootstrap round's parts
+    "backbone": SubstanceTrainConfig(preset="backbone", arch="efficientnet-lite0", size=128, epochs=4,
+                                     batch_size=32, iters_per_epoch=30, lr=1e-3),
+    "backbone-tiny": SubstanceTrainConfig(preset="backbone-tiny", arch="efficientnet-lite0", size=32, epochs=1,
+                                          batch_size=4, iters_per_epoch=2, lr=1e-3),
 }
 
 

@@ -36,7 +36,8 @@ from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.dataset import RegionDataset, example_seed, substance_label
 from photoshape_flow.classify.loss import MultitaskLoss
-from photoshape_flow.classify.resnet import NUM_SUBSTANCE_OUTPUTS, MaterialResNet
+from photoshape_flow.classify.networks import MaterialNetwork
+from photoshape_flow.classify.resnet import NUM_SUBSTANCE_OUTPUTS
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +55,16 @@ def make_loss(config: ClassifierConfig) -> MultitaskLoss:
 
 
 def make_optimizer(model: torch.nn.Module, loss: MultitaskLoss, config: ClassifierConfig) -> torch.optim.Optimizer:
-    """The optimizer with two groups: network weights (decayed) and log-variances (never decayed)."""
-    groups: list[dict[str, Any]] = [{"params": list(model.parameters()), "weight_decay": config.weight_decay}]
+    """The optimizer with groups for the network weights (decayed) and the log-variances (never decayed).
+
+    A network on a pretrained backbone gives its own groups (new heads at the full step, fine-tuned
+    blocks at ``backbone_lr_scale`` of it: `lr_scale` in the group); frozen weights are left out.
+    """
+    split = getattr(model, "parameter_groups", None)
+    groups: list[dict[str, Any]] = (
+        split(config.weight_decay, config.backbone_lr_scale) if callable(split)
+        else [{"params": [p for p in model.parameters() if p.requires_grad], "weight_decay": config.weight_decay}]
+    )
     learned = loss.learned_parameters()
     if learned:
         groups.append({"params": learned, "weight_decay": 0.0})
@@ -117,7 +126,7 @@ def worker_context(num_workers: int, device: torch.device | str) -> str | None:
 
 @torch.inference_mode()
 def evaluate(
-    model: MaterialResNet,
+    model: MaterialNetwork,
     dataset: RegionDataset,
     material_substances: Sequence[str],
     *,
@@ -160,7 +169,7 @@ def evaluate(
 
 @dataclass
 class TrainResult:
-    model: MaterialResNet
+    model: MaterialNetwork
     loss: MultitaskLoss
     epoch: int
     history: list[dict[str, Any]] = field(default_factory=list)
@@ -187,7 +196,7 @@ def history_entry(history: Sequence[dict[str, Any]], epoch: int | None = None) -
 
 
 def train_classifier(
-    model: MaterialResNet,
+    model: MaterialNetwork,
     train_set: RegionDataset,
     val_set: RegionDataset | None,
     config: ClassifierConfig,
@@ -240,6 +249,9 @@ def train_classifier(
             break
         started = time.perf_counter()
         train_set.set_epoch(epoch)
+        # the network's own random draws (dropout) restart from (seed, epoch) on every device, so a run
+        # resumed after this epoch's start draws what an uninterrupted one does, on cuda too
+        torch.manual_seed(example_seed(config.seed, epoch, 1 << 41))
         order = torch.randperm(len(train_set), generator=torch.Generator().manual_seed(
             example_seed(config.seed, epoch, 1 << 40)))
         num_batches = len(train_set) // batch_size
@@ -256,7 +268,7 @@ def train_classifier(
         for step, (x, y_mat, y_sub) in enumerate(loader):
             lr = learning_rate(config, epoch * num_batches + step, total_steps)
             for group in optimizer.param_groups:  # the log-variances' group follows the same schedule
-                group["lr"] = lr
+                group["lr"] = lr * group.get("lr_scale", 1.0)
             x = x.to(device, non_blocking=True)
             if config.channels_last:
                 x = x.contiguous(memory_format=torch.channels_last)

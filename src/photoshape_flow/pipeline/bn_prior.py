@@ -179,12 +179,15 @@ def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS
 def substance_readings(network: Any, size: int, cases: list[PhotoCase], substance_of: dict[int, str],
                        prior: float | None) -> Readings:
     """Each scored part's mean substance probability (background left out, renormalised), the truth, the case."""
-    from photoshape_flow.classify.substance_train import predict_substances
+    from photoshape_flow.classify.substance_recognition import substance_map
     from photoshape_flow.vocab import SUBSTANCE_LABELS
 
     probs, truth, group = [], [], []
     for c, case in enumerate(cases):
-        pixels = predict_substances(network, case.image, size, bn_prior=prior)
+        labels = np.zeros(case.image.shape[:2], np.int32)
+        for k, mask in enumerate(case.masks, start=1):
+            labels[mask] = k
+        pixels = substance_map(network, case.image, labels, size, bn_prior=prior)
         for mask, true in zip(case.masks, case.truth, strict=True):
             mean = pixels[1:, mask].mean(1)
             probs.append(mean / max(float(mean.sum()), 1e-12))

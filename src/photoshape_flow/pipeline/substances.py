@@ -116,6 +116,8 @@ def train_or_resume(
     device = resolve_device(settings.device)
     base = train_config if isinstance(train_config, SubstanceTrainConfig) else get_config(train_config)
     config = replace(base, device=device, seed=settings.seed, **overrides)
+    if config.uses_backbone:
+        return train_recogniser(settings, config, progress=progress)
     name = f"substance-{config.preset}"
     with session_scope(url) as session:
         train, val, data_hash = load_bootstrap_data(session, store)
@@ -184,6 +186,33 @@ def train_or_resume(
     return classifier_id, result.model, info
 
 
+def train_recogniser(settings: Settings, config: SubstanceTrainConfig, *,
+                     progress: Progress | None = None) -> tuple[int, Any, dict[str, Any]]:
+    """The part recogniser on the bootstrap round (trained, resumed or reused by the training code)."""
+    from photoshape_flow.classify.substance_recognition import recogniser_config
+    from photoshape_flow.pipeline.training import load_material_classifier, run_training
+
+    classifier_config = recogniser_config(config)
+    classifier_id = run_training(classifier_config, settings=settings, kinds=("bootstrap",), progress=progress,
+                                 network_kind="substance")
+    row, model = load_material_classifier(classifier_id, settings, kind="substance")
+    info = {"classifier_id": classifier_id, "name": row.name, "architecture": row.architecture,
+            "metrics": {k: v for k, v in (row.metrics or {}).items() if k in ("sub@1", "mtl@1", "epochs")},
+            "device": str(model.device)}
+    return classifier_id, model, info
+
+
+def load_substance_network(row: Any, store: BlobStore, device: str) -> Any:
+    """The network of a substance row: the segmentation net, or the part recogniser (`MaterialClassifier`)."""
+    from photoshape_flow.classify.infer import load_classifier
+    from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
+
+    data = store.read_bytes(row.checkpoint_blob)
+    if (row.config or {}).get("arch", "unet") != "unet":
+        return load_classifier(data, device=device)
+    return load_model(checkpoint_from_bytes(data), resolve_device(device))
+
+
 # -- calibration --------------------------------------------------------------------------------------
 
 CALIBRATION_RENDERS = 600  # renders read to fit the part-level temperature (evenly spread over those held out)
@@ -219,11 +248,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
     a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
     """
     from photoshape_flow.classify.substance_calibration import fit_temperature, nll, part_calibration_set
-    from photoshape_flow.classify.substance_train import (
-        checkpoint_from_bytes,
-        load_model,
-        predict_substances,
-    )
+    from photoshape_flow.classify.substance_recognition import substance_map
     from photoshape_flow.pipeline.bn_prior import stored_bn_prior
 
     url = settings.resolved_database_url
@@ -242,14 +267,14 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
             return None if value is None else float(value)
         size = int((row.config or {}).get("size") or 128)
         checkpoint_ref = row.checkpoint_blob
-    model = load_model(checkpoint_from_bytes(store.read_bytes(checkpoint_ref)), resolve_device(settings.device))
+        model = load_substance_network(row, store, settings.device)
     predictions = []
     for key, blobs in renders:
         try:
             image = store.load_image(blobs["beauty"])
             part_ids = _load_label_map(store, blobs["part_ids"]).astype(np.int64)
             substance_ids = _load_label_map(store, blobs["substance_ids"]).astype(np.int64)
-            probs = predict_substances(model, image[..., :3], size, bn_prior=bn_prior)
+            probs = substance_map(model, image[..., :3], part_ids, size, bn_prior=bn_prior)
             if probs.shape[1:] != part_ids.shape:
                 probs = _resize_probs(probs, part_ids.shape)
         except (KeyError, OSError, ValueError) as exc:
@@ -286,7 +311,7 @@ def assign_part_substances(
     (`classify.bn_adapt`, chosen by `pipeline.bn_prior`; None: as trained).
     """
     from photoshape_flow.classify.substance_parts import part_substances
-    from photoshape_flow.classify.substance_train import predict_substances
+    from photoshape_flow.classify.substance_recognition import substance_map
 
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
@@ -335,7 +360,7 @@ def assign_part_substances(
             image = store.load_image(image_blob)
             if image.ndim == 2:
                 image = np.repeat(image[..., None], 3, axis=2)
-            probs = predict_substances(model, image[..., :3], size, bn_prior=bn_prior)
+            probs = substance_map(model, image[..., :3], part_map, size, bn_prior=bn_prior)
             if probs.shape[1:] != part_map.shape:
                 probs = _resize_probs(probs, part_map.shape)
             results = part_substances(part_map, probs, [index for _, index in parts], min_pixels=min_pixels)

@@ -141,11 +141,13 @@ def newest_material_classifier(session: Session) -> Classifier | None:
 
 
 def load_material_classifier(
-    classifier_id: int | None = None, settings: Settings | None = None, device: str | None = None
+    classifier_id: int | None = None, settings: Settings | None = None, device: str | None = None,
+    kind: str = "material",
 ) -> tuple[Classifier, Any]:
     """(row, `MaterialClassifier`) for `classifier_id` or the newest ok material classifier.
 
     The model reads photos with the BatchNorm prior chosen for it (`pipeline.bn_prior`), if any.
+    ``kind="substance"`` loads the substances stage's part recogniser (same network family) by id.
     """
     from photoshape_flow.classify.infer import load_classifier
     from photoshape_flow.pipeline.bn_prior import stored_bn_prior
@@ -158,8 +160,8 @@ def load_material_classifier(
                 raise LookupError("no trained material classifier (status ok); run the training stage first")
         else:
             row = session.get(Classifier, classifier_id)
-            if row is None or row.kind != "material":
-                raise LookupError(f"classifier {classifier_id}: no such material classifier")
+            if row is None or row.kind != kind:
+                raise LookupError(f"classifier {classifier_id}: no such {kind} classifier")
             if row.status != STATUS_OK or not row.checkpoint_blob:
                 raise LookupError(f"classifier {classifier_id}: status {row.status}, not usable")
         session.expunge(row)
@@ -228,13 +230,21 @@ def run_training(
     overrides: dict[str, Any] | None = None,
     kinds: Sequence[str] = TRAINING_KINDS,
     progress: Progress | None = None,
+    network_kind: str = "material",
 ) -> int:
-    """Train (or reuse, or resume) the material classifier; returns its `Classifier` id."""
+    """Train (or reuse, or resume) the material classifier; returns its `Classifier` id.
+
+    ``network_kind="substance"``: the same network trained as the substances stage's recogniser (on
+    the bootstrap round, its substance head read per part): its row has kind "substance", so it is
+    never taken for the material classifier, and it never fine-tunes from one.
+    """
     import torch
 
     from photoshape_flow.classify import checkpoint as ckpt
+    from photoshape_flow.classify.backbone import backbone_record
     from photoshape_flow.classify.dataset import RegionDataset, find_regions
-    from photoshape_flow.classify.resnet import build_model, grow_material_head
+    from photoshape_flow.classify.networks import build_network
+    from photoshape_flow.classify.resnet import grow_material_head
     from photoshape_flow.classify.train import select_best, train_classifier
 
     settings = settings or get_settings()
@@ -248,12 +258,13 @@ def run_training(
         data = training_data(session, store, kinds, cfg.val_fraction)
     if not materials.ids:
         raise ValueError("no enabled materials with status ok: nothing for the classifier to predict")
-    params_hash = stable_hash([CODE_VERSION, config_hash(cfg), materials.hash, data.hash])
+    backbone = backbone_record(cfg)
+    params_hash = stable_hash([CODE_VERSION, config_hash(cfg), materials.hash, data.hash, *backbone.values()])
 
     with session_scope(url) as session:
         rows = session.scalars(
             sa.select(Classifier)
-            .where(Classifier.kind == "material", Classifier.params_hash == params_hash)
+            .where(Classifier.kind == network_kind, Classifier.params_hash == params_hash)
             .order_by(Classifier.id.desc())
         ).all()
         done = next((r for r in rows if r.status == STATUS_OK and r.checkpoint_blob), None)
@@ -265,20 +276,20 @@ def run_training(
         if unfinished is not None:
             name, parent_id = unfinished.name, unfinished.parent_id
         else:
-            name = name or f"material-{cfg.name}-{params_hash[:12]}"
+            name = name or f"{network_kind}-{cfg.name}-{params_hash[:12]}"
             taken = session.scalars(sa.select(Classifier).where(Classifier.name == name)).first()
             if taken is not None and taken.status == STATUS_OK:
                 raise ValueError(f"classifier name {name!r} is taken by classifier {taken.id} trained on other inputs")
-            parent = _parent_candidate(session, cfg, materials, finetune_from)
+            parent = _parent_candidate(session, cfg, materials, finetune_from) if network_kind == "material" else None
             parent_id = parent.id if parent is not None else None
         parent_row = session.get(Classifier, parent_id) if parent_id is not None else None
         parent_ref = parent_row.checkpoint_blob if parent_row is not None else None
         epochs = cfg.finetune_epochs if parent_id is not None else cfg.epochs
         row_values: dict[str, Any] = {
             "name": name,
-            "kind": "material",
+            "kind": network_kind,
             "architecture": cfg.architecture,
-            "config": {**cfg.to_dict(), "data_hash": data.hash, "epochs_planned": epochs,
+            "config": {**cfg.to_dict(), **backbone, "data_hash": data.hash, "epochs_planned": epochs,
                        "finetune": parent_id is not None, "kinds": list(kinds)},
             "material_set_hash": materials.hash,
             "materials": [0, *materials.ids],
@@ -324,8 +335,7 @@ def run_training(
             grow_material_head(model, parent_ckpt["materials"], materials.ids, substance_of,
                                generator=torch.Generator().manual_seed(cfg.seed))
         else:
-            model = build_model(cfg.arch, len(materials.ids), width=cfg.width, pretrained=cfg.pretrained,
-                                seed=cfg.seed)
+            model = build_network(cfg, len(materials.ids), seed=cfg.seed)
 
         current = {"ref": resume_ref}
         report = progress or no_progress
@@ -388,9 +398,10 @@ def run_training(
             )
         )
     _drop_superseded(store, current["ref"], ref)
+    stage = "training" if network_kind == "material" else "substances"
     with session_scope(url) as session:
         evaluations = [
-            {"run": name, "stage": "training", "method": "classifier", "metric": key, "value": metrics[key],
+            {"run": name, "stage": stage, "method": "classifier", "metric": key, "value": metrics[key],
              "count": len(val_examples), "params": {"classifier_id": classifier_id, "config": cfg.name}}
             for key in METRIC_KEYS
             if metrics.get(key) is not None

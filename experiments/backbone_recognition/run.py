@@ -1,0 +1,148 @@
+"""Train classifier arms on one collection's renders and score them on its validation renders made photo-like.
+
+    PHOTOSHAPE_DATA_ROOT=... python -m experiments.backbone_recognition.run \\
+        --arm scratch=cpu --arm backbone=backbone --arm noaug=backbone:augment.jpeg_quality=0 --out arms.json
+
+Each arm is `name=preset[:field=value,...]` (dotted fields reach the augmentation). Arms train through
+the pipeline's own `run_training` on the collection's training and bootstrap renders (a new classifier
+row each; run it on a scratch copy of the database: the newest row is what inference reads). They are
+scored on the validation renders (shapes and envmaps no arm trained on), degraded like exemplars and
+with misaligned part maps (`pipeline.bn_prior.photo_cases`), never on exemplars: material top-1 /
+top-5 over the enabled materials, substance top-1 of the substance head and of the material head's
+mass per substance, with 95% bootstrap intervals over renders.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+
+from photoshape_flow.classify.configs import AugmentConfig, get_config
+from photoshape_flow.config import get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.devices import set_torch_threads
+from photoshape_flow.pipeline.bn_prior import photo_cases
+from photoshape_flow.pipeline.training import load_material_classifier, material_set, run_training
+from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import SUBSTANCE_LABELS
+
+
+def arm_config(spec: str):
+    """`preset[:field=value,...]` -> a ClassifierConfig (``augment.x=`` fields reach the augmentation)."""
+    preset, _, rest = spec.partition(":")
+    config = get_config(preset)
+    augment: dict[str, Any] = {}
+    fields: dict[str, Any] = {}
+    for item in filter(None, rest.split(",")):
+        key, _, raw = item.partition("=")
+        value = json.loads(raw) if raw[:1] in "0123456789-[{tf" else raw
+        (augment if key.startswith("augment.") else fields)[key.removeprefix("augment.")] = value
+    if augment:
+        fields["augment"] = replace(config.augment, **augment) if config.augment else AugmentConfig(**augment)
+    return config.replace(**fields)
+
+
+def score(model: Any, cases: list, enabled: set[int]) -> dict[str, Any]:
+    """Per-region hits of material top-1/top-5 and substance (head, material mass), with per-render groups."""
+    columns = np.array([i + 1 for i, mid in enumerate(model.materials) if mid in enabled])
+    ids = np.asarray(model.materials)[columns - 1]
+    subs_of = np.asarray(model.material_substances)[columns - 1]
+    rows: list[tuple[int, float, float, float, float]] = []
+    for c, case in enumerate(cases):
+        mats, subs = model.predict(case.image, list(case.masks))
+        p = mats[:, columns]
+        for k, true in enumerate(case.truth):
+            where = np.nonzero(ids == true)[0]
+            if not len(where):
+                continue
+            t = int(where[0])
+            order = np.argsort(-p[k])
+            true_sub = subs_of[t]
+            head = SUBSTANCE_LABELS[1 + int(np.argmax(subs[k][1:]))]
+            mass = {s: float(p[k][subs_of == s].sum()) for s in set(subs_of)}
+            rows.append((c, float(order[0] == t), float(t in order[:5]), float(head == true_sub),
+                         float(max(mass, key=mass.get) == true_sub)))
+    data = np.asarray(rows)
+    out: dict[str, Any] = {"regions": len(rows), "renders": len(cases), "hits": data.tolist()}
+    rng = np.random.default_rng(0)
+    groups = data[:, 0].astype(int)
+    unique = np.unique(groups)
+    for j, name in enumerate(("top1", "top5", "substance_head", "substance_mass"), start=1):
+        values = data[:, j]
+        boot = []
+        for _ in range(1000):
+            pick = rng.choice(unique, len(unique))
+            boot.append(np.concatenate([values[groups == g] for g in pick]).mean())
+        out[name] = [round(float(values.mean()), 3), round(float(np.percentile(boot, 2.5)), 3),
+                     round(float(np.percentile(boot, 97.5)), 3)]
+    return out
+
+
+def substance_arm(settings: Any, store: BlobStore, spec: str, cases: list, substance_of: dict[int, str]) -> dict:
+    """Part substance top-1 of a substance network on the photo-like cases (the stage's own reading).
+
+    `spec`: "unet" (the newest from-scratch segmentation network on the collection) or a substance
+    preset name on a backbone ("backbone"), trained here on the bootstrap round.
+    """
+    from photoshape_flow.classify.substance_configs import get_config as substance_config
+    from photoshape_flow.pipeline.bn_prior import substance_readings
+    from photoshape_flow.pipeline.substances import load_substance_network, train_recogniser
+
+    started = time.perf_counter()
+    if spec == "unet":
+        with session_scope(settings.resolved_database_url) as session:
+            row = session.scalars(sa.select(m.Classifier).where(m.Classifier.kind == "substance")
+                                  .order_by(m.Classifier.id)).first()
+            network, size, network_id = load_substance_network(row, store, "cpu"), int(row.config["size"]), row.id
+    else:
+        network_id, network, _info = train_recogniser(settings, substance_config(spec, seed=settings.seed))
+        size = 128
+    probs, truth, group = substance_readings(network, size, cases, substance_of, None)
+    hits = (probs.argmax(1) == truth).astype(float)
+    rows = np.stack([group, hits, hits, hits, hits], 1)
+    return {"spec": spec, "classifier": network_id, "train_seconds": round(time.perf_counter() - started, 1),
+            "regions": len(hits), "substance_part": round(float(hits.mean()), 3), "hits": rows.tolist()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arm", action="append", default=[], help="name=preset[:field=value,...]")
+    parser.add_argument("--substance", action="append", default=[], help="name=unet|<substance preset>")
+    parser.add_argument("--renders", type=int, default=100, help="validation renders made photo-like")
+    parser.add_argument("--out", default="arms.json")
+    args = parser.parse_args()
+    settings = get_settings()
+    set_torch_threads(settings.torch_threads)
+    store = BlobStore(settings.blob_root)
+    with session_scope(settings.resolved_database_url) as session:
+        cases = photo_cases(session, store, settings, args.renders)
+        enabled = set(material_set(session).ids)
+        substance_of = dict(session.execute(sa.select(m.Material.id, m.Material.substance)).all())
+    results: dict[str, Any] = {}
+    for arm in args.substance:
+        name, _, spec = arm.partition("=")
+        results[name] = substance_arm(settings, store, spec, cases, substance_of)
+        print(name, json.dumps({k: v for k, v in results[name].items() if k != "hits"}), flush=True)
+    for arm in args.arm:
+        name, _, spec = arm.partition("=")
+        config = arm_config(spec)
+        started = time.perf_counter()
+        classifier_id = run_training(config, name=f"exp-{name}-{config.architecture}", settings=settings)
+        seconds = time.perf_counter() - started
+        _row, model = load_material_classifier(classifier_id, settings)
+        results[name] = {"spec": spec, "classifier": classifier_id, "train_seconds": round(seconds, 1),
+                         **score(model, cases, enabled)}
+        print(name, json.dumps({k: v for k, v in results[name].items() if k != "hits"}), flush=True)
+    with open(args.out, "w") as handle:
+        json.dump(results, handle, indent=1)
+
+
+if __name__ == "__main__":
+    main()
