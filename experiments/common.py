@@ -17,11 +17,10 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
-from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.pipeline.calibration import COLOR_SIGMA_RENDERS, material_lab
-from photoshape_flow.pipeline.substances import substance_temperature
+from photoshape_flow.pipeline.substances import load_substance_network, substance_temperature
 from photoshape_flow.pipeline.training import training_data
 from photoshape_flow.store import BlobStore
 
@@ -38,7 +37,7 @@ class Evidence:
     sigma: float | None  # the colour likelihood's sigma, fit on the validation renders
     network_id: int  # the newest substance network behind the part substances
     temperature: float | None  # its part-level temperature
-    network: Any  # the substance network itself
+    network: Any  # the substance network itself (segmentation net, or the part recogniser's MaterialClassifier)
     net_size: int  # its input size
 
 
@@ -55,6 +54,6 @@ def load_evidence(session: Session, store: BlobStore, settings: Settings, materi
         material_substance={mat.id: mat.substance for mat in materials},
         labs=material_lab_matrix(materials_order, mat_labs), sigma=sigma, network_id=newest,
         temperature=substance_temperature(settings, newest),
-        network=load_model(checkpoint_from_bytes(store.read_bytes(net_row.checkpoint_blob))),
+        network=load_substance_network(net_row, store, "cpu"),
         net_size=int(net_row.config.get("size") or 128),
     )

@@ -190,6 +190,9 @@ def main() -> None:
         ev = load_evidence(session, store, settings, clf.materials)
         material_substance, labs, sigma, temperature = ev.material_substance, ev.labs, ev.sigma, ev.temperature
         network, net_size, newest = ev.network, ev.net_size, ev.network_id
+        if not hasattr(network, "width"):  # the per-pixel map below needs the segmentation network
+            sys.exit("aligned_validation reads the from-scratch segmentation network's per-pixel map; this "
+                     "collection's substance network is the part recogniser (D53)")
         cameras, hog, shape_of_row, blocks = None, None, [], []
         for feature in session.execute(sa.select(m.ViewFeature).where(m.ViewFeature.status == "ok")
                                        .order_by(m.ViewFeature.shape_id)).scalars():

@@ -18,6 +18,7 @@ import argparse
 import json
 import time
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,6 +33,8 @@ from photoshape_flow.pipeline.bn_prior import photo_cases
 from photoshape_flow.pipeline.training import load_material_classifier, material_set, run_training
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
+
+from ..common import results_dir
 
 
 def arm_config(spec: str):
@@ -116,7 +119,7 @@ def main() -> None:
     parser.add_argument("--arm", action="append", default=[], help="name=preset[:field=value,...]")
     parser.add_argument("--substance", action="append", default=[], help="name=unet|<substance preset>")
     parser.add_argument("--renders", type=int, default=100, help="validation renders made photo-like")
-    parser.add_argument("--out", default="arms.json")
+    parser.add_argument("--out", default=None, help="default: <data root>/experiments/backbone_recognition/arms.json")
     args = parser.parse_args()
     settings = get_settings()
     set_torch_threads(settings.torch_threads)
@@ -140,8 +143,10 @@ def main() -> None:
         results[name] = {"spec": spec, "classifier": classifier_id, "train_seconds": round(seconds, 1),
                          **score(model, cases, enabled)}
         print(name, json.dumps({k: v for k, v in results[name].items() if k != "hits"}), flush=True)
-    with open(args.out, "w") as handle:
-        json.dump(results, handle, indent=1)
+    out = Path(args.out) if args.out else results_dir(settings, "backbone_recognition") / "arms.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=1))
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

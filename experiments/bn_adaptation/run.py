@@ -26,11 +26,12 @@ import numpy as np
 import sqlalchemy as sa
 
 from experiments.common import results_dir
-from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model, predict_substances
+from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.pipeline.bn_prior import PhotoCase, photo_cases
+from photoshape_flow.pipeline.substances import load_substance_network
 from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
@@ -67,7 +68,10 @@ def score_network(network: Any, size: int, items: list[PhotoCase], prior: float 
     """Per render: the substance network's part-level top-1 (mean probability in the mask) and region count."""
     hits, regions = [], []
     for item in items:
-        probs = predict_substances(network, item.image, size, bn_prior=prior)
+        labels = np.zeros(item.image.shape[:2], np.int32)
+        for k, mask in enumerate(item.masks, start=1):
+            labels[mask] = k
+        probs = substance_map(network, item.image, labels, size, bn_prior=prior)
         good = 0.0
         for mask, true in zip(item.masks, item.truth, strict=True):
             mean = probs[1:, mask].mean(1)
@@ -104,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     with session_scope(settings.resolved_database_url) as session:
         newest = max(n for n in session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars() if n)
         net_row = session.get(m.Classifier, newest)
-        network = load_model(checkpoint_from_bytes(store.read_bytes(net_row.checkpoint_blob)))
+        network = load_substance_network(net_row, store, "cpu")
         net_size = int((net_row.config or {}).get("size") or 128)
     results: dict[str, Any] = {"classifier": row.id, "renders": args.renders, "conditions": {}}
     for condition, items in conditions.items():

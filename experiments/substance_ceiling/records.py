@@ -34,7 +34,7 @@ from photoshape_flow.align.partmap import resize_labels
 from photoshape_flow.classify.assignment import median_lab
 from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.substance_parts import part_substances
-from photoshape_flow.classify.substance_train import predict_substances
+from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -150,7 +150,7 @@ def main() -> None:
         data = training_data(session, store)
         for number, ids, rgb, regions in validation_regions(data.val[:COLOR_SIGMA_RENDERS], index, min_fraction):
             mat, sub = clf.predict(rgb, [mask for _, mask in regions])
-            net = part_substances(ids, predict_substances(ev.network, rgb, ev.net_size), [r[0] for r in regions])
+            net = part_substances(ids, substance_map(ev.network, rgb, ids, ev.net_size), [r[0] for r in regions])
             for k, ((mid, mask), part) in enumerate(zip(regions, net, strict=True)):
                 validation.append({
                     "render": number, "fraction": float(mask.mean()), "truth": index[mid],

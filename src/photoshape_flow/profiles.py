@@ -65,7 +65,7 @@ class SubstancesConfig:
     bootstrap_count: int = 2000
     size: int = 128
     spp: int = 32
-    network: SubstanceTrainConfig = SUBSTANCE_PRESETS["backbone"]
+    network: SubstanceTrainConfig = SUBSTANCE_PRESETS["cpu"]
 
 
 @dataclass(frozen=True)
@@ -207,22 +207,21 @@ class Profile:
         return json.loads(json.dumps(dataclasses.asdict(self)))
 
 
-# both networks are the part recogniser on ImageNet EfficientNet-Lite (D53); Lite2 at the GPU scale
+# the classifier is the part recogniser on ImageNet EfficientNet-Lite (Lite2 at the GPU scale); the
+# substances stage keeps the from-scratch segmentation network, which the recogniser did not beat (D53)
 _CPU_CLASSIFIER = CLASSIFIER_PRESETS["backbone"]
-_CPU_SUBSTANCES = SUBSTANCE_PRESETS["backbone"]
+_CPU_SUBSTANCES = SUBSTANCE_PRESETS["cpu"]
 _TINY_CLASSIFIER = replace(CLASSIFIER_PRESETS["tiny"], arch="efficientnet-lite0", crop_size=32)
 _GPU_CLASSIFIER = replace(CLASSIFIER_PRESETS["backbone"], name="backbone-gpu", arch="efficientnet-lite2",
                           crop_size=224, image_size=256, batch_size=64, epochs=30, max_steps_per_epoch=None,
                           num_workers=4, channels_last=True, eval_batch_size=128)
-_GPU_SUBSTANCES = replace(SUBSTANCE_PRESETS["backbone"], preset="backbone-gpu", arch="efficientnet-lite2", size=256,
-                          epochs=30, batch_size=64, iters_per_epoch=None, device="cuda")
 
 PROFILES: dict[str, Profile] = {
     "tiny": Profile(
         name="tiny",
         coarse_alignment=CoarseAlignmentConfig(exemplar_topk=2, shape_topn=4),
         fine_alignment=FineAlignmentConfig(size=96),
-        substances=SubstancesConfig(bootstrap_count=24, size=48, spp=4, network=SUBSTANCE_PRESETS["backbone-tiny"]),
+        substances=SubstancesConfig(bootstrap_count=24, size=48, spp=4, network=SUBSTANCE_PRESETS["tiny"]),
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
         training=_TINY_CLASSIFIER,
         inference=InferenceConfig(top_k=3),
@@ -235,7 +234,7 @@ PROFILES: dict[str, Profile] = {
         name="small",
         coarse_alignment=CoarseAlignmentConfig(exemplar_topk=3, shape_topn=6),
         fine_alignment=FineAlignmentConfig(size=192),
-        substances=SubstancesConfig(bootstrap_count=160, size=96, spp=16, network=_CPU_SUBSTANCES),
+        substances=SubstancesConfig(bootstrap_count=160, size=96, spp=16, network=replace(_CPU_SUBSTANCES, epochs=20)),
         training_renders=TrainingRendersConfig(count=320, size=96, spp=16),
         training=replace(_CPU_CLASSIFIER, epochs=4),
         fit=FitConfig(size=96, spp=8, rotations=4, refine_max_rank=1),
@@ -246,7 +245,7 @@ PROFILES: dict[str, Profile] = {
         coarse_alignment=CoarseAlignmentConfig(exemplar_topk=4, shape_topn=12),
         fine_alignment=FineAlignmentConfig(size=256),
         substances=SubstancesConfig(bootstrap_count=1200, size=128, spp=32,
-                                    network=replace(_CPU_SUBSTANCES, epochs=8, iters_per_epoch=60)),
+                                    network=replace(_CPU_SUBSTANCES, epochs=60)),
         training_renders=TrainingRendersConfig(count=3000, size=128, spp=32),
         training=replace(_CPU_CLASSIFIER, epochs=8, max_steps_per_epoch=80),
         fit=FitConfig(size=128, spp=8, rotations=4, refine_max_rank=1),
@@ -257,7 +256,7 @@ PROFILES: dict[str, Profile] = {
         name="paper",
         coarse_alignment=CoarseAlignmentConfig(exemplar_topk=8, shape_topn=12),
         fine_alignment=FineAlignmentConfig(size=500),
-        substances=SubstancesConfig(bootstrap_count=20000, size=256, spp=128, network=_GPU_SUBSTANCES),
+        substances=SubstancesConfig(bootstrap_count=20000, size=256, spp=128, network=SUBSTANCE_PRESETS["gpu"]),
         training_renders=TrainingRendersConfig(count=156000, size=384, spp=256),
         training=_GPU_CLASSIFIER,
         inference=InferenceConfig(top_k=10),

@@ -49,6 +49,8 @@ class SubstanceTrainConfig:
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         data["crop_scale"] = list(self.crop_scale)
+        if not self.uses_backbone:  # the segmentation network's rows (and hashes) stay as they were
+            data.pop("arch")
         return data
 
     @classmethod
