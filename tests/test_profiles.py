@@ -17,16 +17,11 @@ def test_every_profile_has_a_config_for_every_registered_stage() -> None:
             assert dataclasses.is_dataclass(stage.config(profile)), (profile.name, stage.name)
 
 
-def test_profiles_build_the_classifier_on_the_pretrained_backbone() -> None:
-    """Every profile's classifier is the part recogniser (D53), its substance network the segmentation
-    net: named presets with fields changed, so a profile's networks hash like the presets they name."""
-    assert PROFILES["medium"].training == get_config("backbone", epochs=8, max_steps_per_epoch=80)
-    assert PROFILES["small"].training == get_config("backbone", epochs=4)
-    assert PROFILES["tiny"].training == get_config("tiny", arch="efficientnet-lite0", crop_size=32)
-    assert PROFILES["paper"].training.arch == "efficientnet-lite2"
-    assert PROFILES["small"].substances.network.epochs == 20
-    for profile in PROFILES.values():
-        assert profile.training.uses_backbone and not profile.substances.network.uses_backbone, profile.name
+def test_presets_are_the_classifier_configs_the_old_override_dicts_built() -> None:
+    """The medium classifier must hash as before: the same named preset with the same fields changed."""
+    medium = PROFILES["medium"].training
+    assert medium == get_config("cpu", epochs=12, max_steps_per_epoch=80, image_size=128)
+    assert PROFILES["small"].substances.network.epochs == 20 and PROFILES["tiny"].training.name == "tiny"
 
 
 def test_overrides_coerce_to_the_field_types() -> None:

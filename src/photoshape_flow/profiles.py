@@ -193,7 +193,7 @@ class Profile:
     fine_alignment: FineAlignmentConfig = field(default_factory=FineAlignmentConfig)
     substances: SubstancesConfig = field(default_factory=SubstancesConfig)
     training_renders: TrainingRendersConfig = field(default_factory=TrainingRendersConfig)
-    training: ClassifierConfig = CLASSIFIER_PRESETS["backbone"]
+    training: ClassifierConfig = CLASSIFIER_PRESETS["cpu"]
     inference: InferenceConfig = field(default_factory=InferenceConfig)
     fit: FitConfig = field(default_factory=FitConfig)
     publish: PublishConfig = field(default_factory=PublishConfig)
@@ -207,14 +207,8 @@ class Profile:
         return json.loads(json.dumps(dataclasses.asdict(self)))
 
 
-# the classifier is the part recogniser on ImageNet EfficientNet-Lite (Lite2 at the GPU scale); the
-# substances stage keeps the from-scratch segmentation network, which the recogniser did not beat (D53)
-_CPU_CLASSIFIER = CLASSIFIER_PRESETS["backbone"]
+_CPU_CLASSIFIER = CLASSIFIER_PRESETS["cpu"]
 _CPU_SUBSTANCES = SUBSTANCE_PRESETS["cpu"]
-_TINY_CLASSIFIER = replace(CLASSIFIER_PRESETS["tiny"], arch="efficientnet-lite0", crop_size=32)
-_GPU_CLASSIFIER = replace(CLASSIFIER_PRESETS["backbone"], name="backbone-gpu", arch="efficientnet-lite2",
-                          crop_size=224, image_size=256, batch_size=64, epochs=30, max_steps_per_epoch=None,
-                          num_workers=4, channels_last=True, eval_batch_size=128)
 
 PROFILES: dict[str, Profile] = {
     "tiny": Profile(
@@ -223,7 +217,7 @@ PROFILES: dict[str, Profile] = {
         fine_alignment=FineAlignmentConfig(size=96),
         substances=SubstancesConfig(bootstrap_count=24, size=48, spp=4, network=SUBSTANCE_PRESETS["tiny"]),
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
-        training=_TINY_CLASSIFIER,
+        training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
         # a smoke profile: calibration and refinement run, briefly (they are over half of a tiny run's time)
         fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=3,
@@ -247,7 +241,7 @@ PROFILES: dict[str, Profile] = {
         substances=SubstancesConfig(bootstrap_count=1200, size=128, spp=32,
                                     network=replace(_CPU_SUBSTANCES, epochs=60)),
         training_renders=TrainingRendersConfig(count=3000, size=128, spp=32),
-        training=replace(_CPU_CLASSIFIER, epochs=8, max_steps_per_epoch=80),
+        training=replace(_CPU_CLASSIFIER, epochs=12, max_steps_per_epoch=80, image_size=128),
         fit=FitConfig(size=128, spp=8, rotations=4, refine_max_rank=1),
         publish=PublishConfig(max_rank=1, views=8, size=256, spp=64),
     ),
@@ -258,7 +252,7 @@ PROFILES: dict[str, Profile] = {
         fine_alignment=FineAlignmentConfig(size=500),
         substances=SubstancesConfig(bootstrap_count=20000, size=256, spp=128, network=SUBSTANCE_PRESETS["gpu"]),
         training_renders=TrainingRendersConfig(count=156000, size=384, spp=256),
-        training=_GPU_CLASSIFIER,
+        training=CLASSIFIER_PRESETS["paper"],
         inference=InferenceConfig(top_k=10),
         fit=FitConfig(top_k=10, size=256, spp=32, rotations=12),
         publish=PublishConfig(max_rank=12, size=1280, spp=256),

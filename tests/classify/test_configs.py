@@ -29,3 +29,15 @@ def test_round_trip_and_hash() -> None:
     assert get_config("tiny").architecture == "resnet18-w8" and cpu.architecture == "resnet18"
     with pytest.raises(ValueError, match="unknown classifier config"):
         get_config("huge")
+
+
+def test_recogniser_fields_leave_the_resnet_hashes_as_they_were() -> None:
+    """Classifiers trained before the recogniser keep their params_hash (no retrain on upgrade)."""
+    from photoshape_flow.classify.configs import AugmentConfig, config_hash, get_config
+
+    resnet = get_config("cpu")
+    assert config_hash(resnet.replace(crop_size=999, isolate_part=False)) == config_hash(resnet)
+    assert config_hash(resnet.replace(augment=AugmentConfig(hue=0.02, saturation=0.15, jpeg_quality=70))) != \
+        config_hash(resnet)
+    backbone = get_config("backbone")
+    assert config_hash(backbone.replace(crop_size=224)) != config_hash(backbone)

@@ -161,3 +161,26 @@ def test_substances_stage_end_to_end_and_idempotent(
         refit = session.get(m.Classifier, classifier.id).metrics
     assert refit["part_temperature_renders"] == metrics["part_temperature_renders"] + 1
     assert refit["part_temperature_key"] != metrics["part_temperature_key"]
+
+
+def test_the_part_recogniser_as_the_substance_network_labels_every_part(db_url: str, store) -> None:
+    """`substances.network.arch` on a backbone: a kind-"substance" row, each part classified as a whole."""
+    from photoshape_flow.classify.substance_configs import get_config
+
+    with session_scope(db_url) as session:
+        col = seed_collection(session, store, exemplar_size=EXEMPLAR)
+    hidden_part = _add_alignments(db_url, store, col)
+    summary = run_substances(bootstrap_count=6, size=32, spp=2, train_config=get_config("backbone-tiny"))
+    assert summary["part_substances"]["updated"] == 3 and summary["part_substances"]["failed"] == 0
+    with session_scope(db_url) as session:
+        networks = session.execute(sa.select(m.Classifier)).scalars().all()
+        rows = list(session.execute(sa.select(m.PartSubstance)).scalars())
+    assert [(n.kind, n.architecture) for n in networks] == [("substance", "efficientnet-lite0-part32")]
+    for row in rows:
+        if row.part_id == hidden_part:
+            assert not row.observed
+            continue
+        # a painted map: every pixel of a part carries the part's vector, so the vote is unanimous
+        assert row.observed and row.substance in SUBSTANCES
+        assert row.probs[row.substance] == pytest.approx(row.confidence)
+        assert sum(row.probs[s] for s in SUBSTANCES) == pytest.approx(1.0, abs=1e-6)

@@ -221,3 +221,19 @@ def test_no_training_renders_fails_the_row_with_a_reason(db_url: str, store) -> 
     with session_scope(db_url) as session:
         (row,) = session.scalars(sa.select(Classifier)).all()
         assert row.status == "failed" and "training regions" in row.error
+
+
+def test_the_part_recogniser_trains_through_the_stage_and_records_its_weights(db_url: str, store) -> None:
+    """The recogniser (D53) is one config field away: same stage, same row, the weights' sha256 on it."""
+    from photoshape_flow.classify.backbone import weights_sha256
+
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 8, "a")
+    classifier_id = run_training("tiny", overrides={"arch": "efficientnet-lite0", "crop_size": 32})
+    row = _classifier(db_url, classifier_id)
+    assert row.status == "ok" and row.architecture == "efficientnet-lite0-part32"
+    assert row.config["backbone_sha256"] == weights_sha256("efficientnet-lite0")
+    _, classifier = load_material_classifier(classifier_id)
+    assert type(classifier.model).__name__ == "PartRecognizer" and not classifier.model.training
+    # the ResNet on the same data is another network (the architecture is in the hash), not a reuse
+    assert run_training("tiny") != classifier_id

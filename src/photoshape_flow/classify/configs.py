@@ -213,9 +213,21 @@ def get_config(name: str = "cpu", **overrides: Any) -> ClassifierConfig:
     return CONFIGS[name].replace(**overrides) if overrides else CONFIGS[name]
 
 
+_RECOGNISER_FIELDS = ("crop_size", "crop_context", "isolate_part", "train_from_stage", "backbone_lr_scale")
+_PHOTO_AUGMENT_FIELDS = ("white_balance", "noise", "jpeg_quality")
+
+
 def config_hash(config: ClassifierConfig) -> str:
     """sha256 of the configuration fields that change the trained model."""
     data = config.to_dict()
     for key in ("eval_batch_size", "num_workers"):  # do not change the result
         data.pop(key, None)
+    # fields added with the part recogniser count only where they act, so the ResNet configurations
+    # (and every classifier trained with them) keep their hashes
+    if not config.uses_backbone:
+        for key in _RECOGNISER_FIELDS:
+            data.pop(key, None)
+    for key in _PHOTO_AUGMENT_FIELDS:
+        if not data["augment"].get(key):
+            data["augment"].pop(key, None)
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
