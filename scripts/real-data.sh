@@ -40,7 +40,7 @@ $PS ingest shapes "$SHARED"/models/polyhaven_* --allow-rejected --license CC0-1.
 $PS ingest exemplars "$SHARED/photos/abo" --allow-rejected --category chair --source abo \
   --license CC-BY-4.0 --attribution "Amazon Berkeley Objects, (c) Amazon.com, CC BY 4.0" \
   --source-url https://amazon-berkeley-objects.s3.amazonaws.com/index.html
-for stage in coarse-alignment fine-alignment substances training-renders training inference publish; do
+for stage in coarse-alignment fine-alignment substances training-renders training inference fit publish; do
   $PS run "$stage" --profile "$PROFILE"
 done
 $PS gallery "$ROOT/gallery" --sheet "$ROOT/contact-sheet.png"
