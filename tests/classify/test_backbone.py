@@ -97,6 +97,13 @@ def test_part_crop_is_the_masks_square_on_white():
     assert float(crop[0, 3].mean()) > 0.95  # the 10 px square fills the crop
     edge = crop_to_mask(torch.cat([torch.zeros(1, 3, 40, 40), x[:, 3:]], 1), 20, context=1.0)
     assert float(edge[0, :3].max()) <= 1.0 and float(edge[0, 3].mean()) < 0.4  # context around it
+    # a part at the image's corner: the crop reaches past the border, which reads white, mask 0
+    corner = torch.zeros(1, 4, 40, 40)
+    corner[0, 3, 0:10, 0:10] = 1
+    out = crop_to_mask(corner, 20, context=1.0)  # a 20 px square centred on (5, 5): a quarter outside
+    assert float(out[0, :3, :4, :4].min()) == pytest.approx(1.0)  # outside the image: white
+    assert float(out[0, :3, 12:, 12:].max()) == pytest.approx(0.0)  # inside the image: its black pixels
+    assert float(out[0, 3, :4, :4].max()) == 0.0
 
 
 def _textured(kind: int, colour: np.ndarray, rng: np.random.Generator, size: int = 48) -> np.ndarray:

@@ -267,7 +267,8 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
             return None if value is None else float(value)
         size = int((row.config or {}).get("size") or 128)
         checkpoint_ref = row.checkpoint_blob
-        model = load_substance_network(row, store, settings.device)
+        session.expunge(row)
+    model = load_substance_network(row, store, settings.device)  # outside the session: a blob read
     predictions = []
     for key, blobs in renders:
         try:
