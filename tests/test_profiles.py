@@ -47,7 +47,6 @@ def test_overrides_coerce_to_the_field_types() -> None:
     ("publish.formats.glb=1", "no fields to set"),
     ("name=other", "no field 'name'"),
     ("inference.methods=classifier,magic", "unknown method 'magic'"),
-    ("fit.lighting_loss=guess", "fit.lighting_loss: unknown loss 'guess'"),
 ])
 def test_bad_overrides_fail_with_one_line_naming_the_path(override: str, message: str) -> None:
     with pytest.raises(ProfileError, match=message):

@@ -13,6 +13,8 @@ weights of the classifier's calibration):
     gt-envmap  the truth's envmap file, its rotation and exposure searched as the stage searches its own
     gt-mask    the photo's part regions from the truth's part mask instead of the CRF map
     gt-both    both
+    gt-both-distance  both, ranked by the rendered comparison alone (no ranking prior): what the
+               distance itself knows
 
 and the table gives material top-1 and substance accuracy per scored part (a part scored as
 `photoshape eval` scores it, against the CRF map) with 95% bootstrap intervals over exemplars, the
@@ -54,7 +56,7 @@ from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, resolve_classif
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.store import BlobStore
 
-CONDITIONS = ("fit", "gt-light", "gt-envmap", "gt-mask", "gt-both")
+CONDITIONS = ("fit", "gt-light", "gt-envmap", "gt-mask", "gt-both", "gt-both-distance")
 Observations = dict[str, dict[str, dict[int, list[float]]]]  # condition -> figure -> exemplar -> values
 
 
@@ -96,7 +98,7 @@ def with_labels(ctx: FitContext, data: PairData, labels: np.ndarray, min_pixels:
             if int(region.sum()) >= min_pixels:
                 masks[index] = region
     return PairData(data.pair, FitScene(scene.mesh, scene.camera, scene.photo_linear, scene.photo_lab, masks,
-                                        scene.blur), data.rows, data.source_hash)
+                                        scene.blur, scene.background, scene.features), data.rows, data.source_hash)
 
 
 def searched(ctx: FitContext, data: PairData, truth_env: Any) -> tuple[Any, float]:
@@ -112,11 +114,14 @@ def searched(ctx: FitContext, data: PairData, truth_env: Any) -> tuple[Any, floa
     return turned[0](best.rotation), scale
 
 
-def winners(ctx: FitContext, data: PairData, light: dict[str, Any], envmap: Any) -> tuple[dict[int, int], dict]:
-    """Each observed part's fit winner under the given lighting, and its candidates."""
+def winners(ctx: FitContext, data: PairData, light: dict[str, Any], envmap: Any,
+            prior_weight: float | None = None) -> tuple[dict[int, int], dict]:
+    """Each observed part's fit winner under the given lighting, and its candidates (`prior_weight`:
+    the ranking prior's weight in the final order, default the calibration's)."""
     candidates = candidates_of(ctx, data)
     measured, _ = select_materials(ctx, data, candidates, light, envmap)
-    return ({i: rank_candidates(c, measured.get(i, {}), ctx.prior_weight)[0].candidate.material_id
+    weight = ctx.prior_weight if prior_weight is None else prior_weight
+    return ({i: rank_candidates(c, measured.get(i, {}), weight)[0].candidate.material_id
              for i, c in candidates.items() if c}, candidates)
 
 
@@ -133,6 +138,7 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
     # (data, envmap, starting exposure): the truth's light starts from exposure 1 (its scale is the
     # photo's); the truth's envmap at a searched rotation from the search's exposure; the rounds re-solve it
     runs: dict[str, tuple[PairData, Any, float]] = {"fit": (data, None, float(light.get("exposure", 1.0)))}
+    distance_only = {"gt-both-distance"}
     if gt_env is not None:
         runs["gt-light"] = (data, gt_env, 1.0)
         runs["gt-envmap"] = (data, *searched(ctx, data, gt_env))
@@ -140,9 +146,11 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
         runs["gt-mask"] = (gt_data, None, float(light.get("exposure", 1.0)))
     if gt_env is not None and gt_data is not None:
         runs["gt-both"] = (gt_data, gt_env, 1.0)
+        runs["gt-both-distance"] = runs["gt-both"]
     classifier_first = {i: rows[0].material_id for i, rows in data.rows.items() if rows}
     for name, (pair_data, envmap, exposure) in runs.items():
-        chosen, candidates = winners(ctx, pair_data, {**light, "exposure": exposure}, envmap)
+        chosen, candidates = winners(ctx, pair_data, {**light, "exposure": exposure}, envmap,
+                                     0.0 if name in distance_only else None)
         for index, (material, substance) in scored.items():
             if index not in chosen:
                 continue
@@ -223,6 +231,7 @@ def main() -> None:
     parser.add_argument("--groundtruth", type=Path, default=None, help="default: the demo's under the data root")
     parser.add_argument("--envmap-dir", type=Path, default=None, help="where lighting.envmap names are found")
     parser.add_argument("--source", default=None, help="only the exemplars of this source")
+    parser.add_argument("--tag", default="", help="write results-TAG.json (arms of one data root side by side)")
     args = parser.parse_args()
     settings = get_settings()
     groundtruth = args.groundtruth or sorted(Path(settings.data_root).glob("demo/*/groundtruth.json"))[-1]
@@ -239,11 +248,11 @@ def main() -> None:
                 delta = row.get(f"{figure}_vs_fit")
                 vs = "" if not delta or delta["value"] is None else f" [{delta['value']:+.3f}]"
                 cells.append(f"{figure} {cell['value']:.3f}{span}{vs} n={cell['count']}")
-        print(f"{name:11s}", " | ".join(cells))
+        print(f"{name:16s}", " | ".join(cells))
     print(counts, f"{results['seconds']} s")
     out = results_dir(settings, "fit_attribution")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(results, indent=2))
+    (out / (f"results-{args.tag}.json" if args.tag else "results.json")).write_text(json.dumps(results, indent=2))
 
 
 if __name__ == "__main__":

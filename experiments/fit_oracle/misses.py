@@ -4,7 +4,7 @@ For each dumped condition: how many cases the hand-set cost gets wrong, how many
 material of another substance than the truth, how often the ranking prior favours the winner, and
 how many true materials are candidates only with the prior floor (colour-nearest or new). Then the
 2-fold held-out figures (folds by render, as the calibration's) of three models: the hand-set cost,
-the fitted cost (the five terms of `fit.calibrate.TERMS`), and the fitted cost with the prior split
+the fitted cost (the terms of `fit.calibrate.TERMS`), and the fitted cost with the prior split
 in two, the classifier's share among its proposals and an indicator "not proposed" (the floor). A
 floor candidate is recognised by its prior cost, so a proposed one whose share fell to the floor
 counts as not proposed.
@@ -29,12 +29,14 @@ from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.profiles import FitConfig
 
 SPLIT_TERMS = (*cal.TERMS, "unproposed")
+PRIOR = cal.TERMS.index("prior")  # the prior's column in a case's features
 
 
 def hand_set() -> np.ndarray:
     """The profile's default weights in `fit.calibrate.TERMS` order."""
     c = FitConfig()
-    return np.array([c.color_weight, c.contrast_weight, c.gradient_weight, c.highlight_weight, c.prior_weight])
+    return np.array([c.color_weight, c.contrast_weight, c.gradient_weight, c.highlight_weight, c.deep_weight,
+                     c.prior_weight])
 
 
 def breakdown(records: Sequence[dict[str, Any]], floor_cost: float) -> Counter[str]:
@@ -45,12 +47,12 @@ def breakdown(records: Sequence[dict[str, Any]], floor_cost: float) -> Counter[s
         features, truth, substances = np.asarray(r["features"], float), int(r["truth"]), r["substances"]
         winner = int(np.argmin(features @ weights))
         out["cases"] += 1
-        out["truth_at_floor"] += int(np.isclose(features[truth, 4], floor_cost, atol=1e-3))
+        out["truth_at_floor"] += int(np.isclose(features[truth, PRIOR], floor_cost, atol=1e-3))
         if winner == truth:
             continue
         out["wrong"] += 1
         out["wrong_other_substance"] += int(substances[winner] != substances[truth])
-        out["wrong_prior_favours_winner"] += int(features[truth, 4] > features[winner, 4])
+        out["wrong_prior_favours_winner"] += int(features[truth, PRIOR] > features[winner, PRIOR])
         out["wrong_truth_closer_in_colour"] += int(features[truth, 0] < features[winner, 0])
     return out
 
@@ -61,8 +63,9 @@ def cases_of(records: Sequence[dict[str, Any]], floor_cost: float | None = None)
     for r in records:
         features = np.asarray(r["features"], float)
         if floor_cost is not None:
-            unproposed = np.isclose(features[:, 4], floor_cost, atol=1e-3).astype(float)
-            features = np.column_stack([features[:, :4], np.where(unproposed > 0, 0.0, features[:, 4]), unproposed])
+            unproposed = np.isclose(features[:, PRIOR], floor_cost, atol=1e-3).astype(float)
+            features = np.column_stack([features[:, :PRIOR], np.where(unproposed > 0, 0.0, features[:, PRIOR]),
+                                        unproposed])
         out.append(cal.Case(features, int(r["truth"]), r["group"]))
     return out
 
@@ -85,7 +88,7 @@ def models(records: Sequence[dict[str, Any]], floor_cost: float) -> dict[str, An
     terms = cal.TERMS
     cal.TERMS = SPLIT_TERMS  # `fit.calibrate` checks the column count against it
     try:
-        split_base = np.append(base, base[4] * floor_cost)  # the same costs as the hand-set floor
+        split_base = np.append(base, base[PRIOR] * floor_cost)  # the same costs as the hand-set floor
         split = cases_of(records, floor_cost)
         out["fitted_split"] = held_out(split, lambda train: cal.fit(train, start=split_base, centre=split_base).theta)
         whole = cal.fit(split, start=split_base, centre=split_base)

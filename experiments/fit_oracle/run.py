@@ -309,9 +309,10 @@ def summary(cases: list[cal.Case], cfg: Any, terms: tuple[str, ...]) -> dict[str
 
 def with_terms(terms: tuple[str, ...], hand_set: Callable[[Any], np.ndarray]) -> None:
     """Make the calibration's fit and its hand-set centre take the probe's column (before `prior`)."""
+    at = len(cal.TERMS) - 1  # the probe sits before `prior`
     cal.TERMS = terms
-    if len(terms) > 5:
-        fc.hand_set = lambda cfg: np.insert(hand_set(cfg), 4, 0.0)
+    if len(terms) > at + 1:
+        fc.hand_set = lambda cfg: np.insert(hand_set(cfg), at, 0.0)
 
 
 def main() -> None:
@@ -334,7 +335,7 @@ def main() -> None:
     oracle.joint_top = args.joint_top
     oracle.wb_step = args.wb_step
     oracle.photo_size = args.photo_size
-    terms = (*cal.TERMS[:4], args.probe, "prior") if args.probe else cal.TERMS
+    terms = (*cal.TERMS[:-1], args.probe, "prior") if args.probe else cal.TERMS
     with_terms(terms, fc.hand_set)
     count = args.cases if args.cases is not None else oracle.cfg.calibration_cases
     with session_scope(settings.resolved_database_url) as session:

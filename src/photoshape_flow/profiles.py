@@ -27,7 +27,7 @@ from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.substance_configs import PRESETS as SUBSTANCE_PRESETS
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS
-from photoshape_flow.vocab import ASSIGNMENT_METHODS, LIGHTING_CORRECTIONS, LIGHTING_LOSSES
+from photoshape_flow.vocab import ASSIGNMENT_METHODS
 
 
 class ProfileError(ValueError):
@@ -109,13 +109,6 @@ class FitConfig:
     rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
     lighting_envmaps: int = 4  # more training envmaps than this: screen all at 2 azimuths, search the best 4
     lighting_rounds: int = 1  # 2+: then select, and light the winners again (worse on validation renders: D42)
-    lighting_loss: str = "appearance"  # what picks the lighting: the first materials' "appearance", "shading"
-    #                                    (where light and shadow fall in each part, albedo removed) or
-    #                                    "shading-rotation" (rotation by shading, envmap by appearance); D49
-    lighting_correction: str = "none"  # "lobes": the chosen envmap's six lobes re-weighted to the photo's
-    #                                    shading, six more renders per exemplar (`fit.scene.correct_lighting`, D50);
-    #                                    "lobes-rgb": a gain per lobe and channel
-    lighting_lobe_strength: float = 0.02  # pull of the lobes' log gains toward each other (1: the envmap as is)
     erode: int = 1  # pixels shrunk off each part mask before comparing
     blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
     exposure_stops: float = 2.0  # each candidate judged at its best exposure this far either side of the
@@ -125,6 +118,8 @@ class FitConfig:
     gradient_weight: float = 0.5  # L* gradient-magnitude statistics, two scales
     highlight_weight: float = 0.0  # L* 90th/99th percentiles above the median (gloss); the calibration may
     #                                raise it (hand-set 0: fitted to 0 on the small demo's validation renders, D38)
+    deep_weight: float = 0.0  # backbone texture moments (`fit.deep_texture`); the calibration may raise it (D54)
+    texture_backbone: str = "efficientnet-lite0"  # the backbone the deep term reads frames with ("none": no term)
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
     # refinement of the winners (`fit.refine`, docs/decisions.md D35): only for the pairs publish uses
@@ -138,14 +133,6 @@ class FitConfig:
     calibration_blurs: tuple[float, ...] = (0.0, 1.0)  # compared on the same renders (empty: `blur` only)
     calibration_at_exemplar_size: bool = True  # degrade the calibration's photos at the median stored
     #                                           exemplar's side, not the render's (D45)
-
-    def __post_init__(self) -> None:
-        if self.lighting_loss not in LIGHTING_LOSSES:
-            raise ProfileError(f"fit.lighting_loss: unknown loss {self.lighting_loss!r}; "
-                               f"choose from {', '.join(LIGHTING_LOSSES)}")
-        if self.lighting_correction not in LIGHTING_CORRECTIONS:
-            raise ProfileError(f"fit.lighting_correction: unknown correction {self.lighting_correction!r}; "
-                               f"choose from {', '.join(LIGHTING_CORRECTIONS)}")
 
 
 PUBLISH_METHODS = ("classifier", "fit")  # assignment methods publish can show (`PublishConfig.method`)

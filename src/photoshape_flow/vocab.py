@@ -44,7 +44,3 @@ STATUS_FAILED = "failed"
 STATUS_REJECTED = "rejected"
 STATUS_PENDING = "pending"
 
-# what picks fit's lighting per exemplar (`fit.scene.estimate_lighting`, `FitConfig.lighting_loss`)
-LIGHTING_LOSSES: tuple[str, ...] = ("appearance", "shading", "shading-rotation")
-# how fit reshapes the chosen training envmap toward the photo (`fit.scene.correct_lighting`, D50)
-LIGHTING_CORRECTIONS: tuple[str, ...] = ("none", "lobes", "lobes-rgb")

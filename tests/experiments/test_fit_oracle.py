@@ -39,16 +39,16 @@ def test_misses_are_counted_by_kind_and_the_split_prior_keeps_the_hand_set_costs
 
     floor = float(-np.log(0.02))
     right = {"group": "a", "truth": 0, "substances": ["wood", "fabric"],
-             "features": [[0.1, 0.1, 0.1, 0.0, 0.5], [0.9, 0.2, 0.2, 0.0, 1.0]]}
+             "features": [[0.1, 0.1, 0.1, 0.0, 0.1, 0.5], [0.9, 0.2, 0.2, 0.0, 0.3, 1.0]]}
     lost = {"group": "b", "truth": 1, "substances": ["leather", "wood"],
-            "features": [[0.5, 0.1, 0.1, 0.0, 0.2], [0.3, 0.1, 0.1, 0.0, floor]]}
+            "features": [[0.5, 0.1, 0.1, 0.0, 0.2, 0.2], [0.3, 0.1, 0.1, 0.0, 0.2, floor]]}
     counts = breakdown([right, lost], floor)
     assert counts == {"cases": 2, "truth_at_floor": 1, "wrong": 1, "wrong_other_substance": 1,
                       "wrong_prior_favours_winner": 1, "wrong_truth_closer_in_colour": 1}
     split = cases_of([lost], floor)[0].features
-    assert split[:, 4].tolist() == [0.2, 0.0] and split[:, 5].tolist() == [0.0, 1.0]
+    assert split[:, 5].tolist() == [0.2, 0.0] and split[:, 6].tolist() == [0.0, 1.0]
     base = hand_set()
-    split_base = np.append(base, base[4] * floor)
+    split_base = np.append(base, base[5] * floor)
     assert np.allclose(split @ split_base, np.asarray(lost["features"]) @ base)  # the same costs
     figures = models([right, lost] * 4, floor)  # four render groups per fold's worth of cases
     assert set(figures) == {"hand_set", "fitted", "fitted_split", "split_weights"}

@@ -33,7 +33,8 @@ def test_a_few_highlights_are_the_highlight_terms_not_the_colours() -> None:
     mask = _square()
     a, b = appearance(matte, mask), appearance(glossy, mask)
     assert a is not None and b is not None
-    color, contrast, gradient, highlight = terms(a, b)
+    color, contrast, gradient, highlight, deep = terms(a, b)
+    assert deep == 0.0  # no backbone statistics measured
     assert color < 0.3 and highlight > 3.0 and highlight > max(contrast, gradient)
     assert b.highlight[1] == pytest.approx(42.0) and a.highlight[1] < 2.5
 

@@ -21,7 +21,6 @@ from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.scene import (
     FitScene,
     FrameRenderer,
-    correct_lighting,
     estimate_lighting,
     render_candidates,
     select_profiled,
@@ -131,80 +130,6 @@ def test_lighting_estimate_recovers_the_rotation_also_after_screening(scene) -> 
     # screened: every envmap at 0 and pi, then only the best one at all four rotations
     best, _, _, renders = estimate_lighting(frame, fit_scene, truth, studios, 4, Weights(), keep=1)
     assert (best.envmap_id, best.rotation, renders) == (TRUE_ENVMAP, 0.0, 3 * 2 + 2)
-
-
-@pytest.mark.parametrize("first", [(6, 6), (4, 3)], ids=["off-white fabric on both", "wood and metal"])
-def test_the_shading_loss_lights_the_photo_even_from_wrong_first_materials(scene, first) -> None:  # type: ignore[no-untyped-def]
-    """The ranking's first materials are wrong: the shading loss still finds the photo's studio (the
-    appearance loss, free to recolour them with a studio's tint, picks another: D49)."""
-    frame, fit_scene = _fit_scene(scene)
-    wrong = [_spec(first[p.index - 1]) for p in fit_scene.mesh.parts]
-    best, _, _, _ = estimate_lighting(frame, fit_scene, wrong, _rotatable(scene[3]), 1, Weights(), loss="shading")
-    assert best.envmap_id == TRUE_ENVMAP
-
-
-TRUE_LOBES = (0.4, 2.5, 1.0, 0.3, 1.0, 1.0)  # the photo's light: the warm studio, more from -x, less from +x
-
-
-def test_the_lobe_correction_reshapes_a_library_envmap_toward_the_photos_light(scene) -> None:  # type: ignore[no-untyped-def]
-    """The photo is lit by the warm studio reshaped by known lobe gains (a light that is in no library)
-    and the first materials are wrong: from the plain studio the correction lowers the shading loss
-    and moves each lobe the way the truth does."""
-    import cv2
-
-    renderer, mesh, camera, studios, _, labels = scene
-    truth = [_spec(TRUTH[p.index]) for p in mesh.parts]
-    reshaped = EnvmapSpec(studios[TRUE_ENVMAP].path, lobes=TRUE_LOBES)
-    photo = linear_to_srgb(EXPOSURE * FrameRenderer(renderer, 64, 32).render(mesh, truth, camera, reshaped))
-    photo = cv2.resize((photo * 255 + 0.5).astype(np.uint8), (48, 48), interpolation=cv2.INTER_AREA)
-    fit_scene = FitScene.from_photo(mesh, camera, photo, cv2.resize(labels, (48, 48),
-                                                                     interpolation=cv2.INTER_NEAREST), [1, 2])
-    wrong = [_spec(6) for _ in mesh.parts]
-    lobes, exposure, before, after = correct_lighting(FrameRenderer(renderer, 48, 8), fit_scene, wrong,
-                                                      studios[TRUE_ENVMAP], strength=0.001)
-    assert after < 0.6 * before
-    assert len(lobes) == 6 and math.prod(lobes) == pytest.approx(1.0, rel=0.01)  # geometric mean 1
-    # the lobes the camera sees the effect of: -x up against +x, -y (under the boxes) down
-    assert lobes[1] > 1.5 * lobes[0]
-    assert exposure > 0
-
-
-@pytest.mark.parametrize("per_channel", [False, True], ids=["grey", "rgb"])
-def test_fit_lobes_recovers_a_known_light_whatever_the_albedo(per_channel: bool) -> None:
-    """Synthetic lobe renders: the photo is each part's albedo (and an exposure) times a known mix (grey,
-    or a gain per lobe and channel); the fit finds the mix up to its scale, and the loss after it is ~0."""
-    rng = np.random.default_rng(3)
-    size = 24
-    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
-    layouts = [0.05 + np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 7.0 ** 2))  # wide lights: both parts see each
-               for cx, cy in rng.uniform(0, size, (6, 2))]
-    basis = [np.repeat(layout[..., None], 3, axis=2) for layout in layouts]
-    true = np.exp(rng.uniform(-0.8, 0.8, (6, 3) if per_channel else 6))
-    true /= np.exp(np.log(true).mean(axis=0))
-    left, right = np.zeros((size, size), bool), np.zeros((size, size), bool)
-    left[:, :12], right[:, 12:] = True, True
-    lit = sum(np.asarray(g) * b for g, b in zip(true, basis, strict=True))
-    photo = lit * np.where(left[..., None], [0.3, 0.5, 0.9], [0.8, 0.6, 0.2]) * 1.7
-    regions = {1: (left, left), 2: (right, right)}
-    shading = lt.photo_shading(photo, {1: left, 2: right}, 1.0)
-    gains, before, after = lt.fit_lobes(basis, shading, regions, 1.0, strength=1e-6, per_channel=per_channel)
-    assert after < 1e-3 * before
-    assert gains == pytest.approx(true, rel=0.1)
-
-
-def test_the_shading_loss_ignores_albedo_and_exposure_but_not_where_the_light_falls() -> None:
-    """Per-part, per-channel gains (an albedo, an exposure, a white balance) cost nothing; a shading
-    gradient running the other way does."""
-    ramp = np.linspace(0.2, 1.0, 24, dtype=np.float32)[None, :, None] * np.ones((24, 24, 3), np.float32)
-    left, right = np.zeros((24, 24), bool), np.zeros((24, 24), bool)
-    left[:, :12], right[:, 12:] = True, True
-    gains = np.where(left[..., None], [0.3, 0.5, 0.9], [1.7, 1.1, 0.4]).astype(np.float32)
-    regions = {1: (left, left), 2: (right, right)}
-    photo = lt.photo_shading(ramp * gains, {1: left, 2: right}, 2.0)
-    assert lt.shading_loss(ramp, photo, regions, 2.0) == pytest.approx(0.0, abs=1e-9)
-    assert lt.shading_loss(ramp[:, ::-1], photo, regions, 2.0) > 0.05
-    assert lt.shading_loss(ramp, lt.photo_shading(ramp, {1: right}, 2.0), {1: (left, right)},
-                           2.0) == float("inf")  # no pixel in both regions
 
 
 def test_a_render_is_blended_with_the_photos_background_at_its_silhouette() -> None:

@@ -131,33 +131,6 @@ def test_envmap_data_matches_mitsuba_and_resamples(renderer, tmp_path: Path) -> 
         envmap_data(EnvmapSpec(tmp_path / "nope.exr"))
 
 
-def test_envmap_lobes_split_the_map_and_point_where_mitsuba_looks(renderer, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    """The six lobes' maps add up to the map itself (gains of 1 leave it as it is, the same cached array);
-    a lobe's light comes from its axis as Mitsuba's envmap plugin reads the data."""
-    import drjit as dr
-    import mitsuba as mi
-
-    from photoshape_flow.render.pool import envmap_data
-    from photoshape_flow.render.specs import LOBE_AXES
-
-    path = write_exr(tmp_path / "e.exr", np.random.default_rng(2).uniform(0.5, 2.0, (16, 32, 3)).astype(np.float32))
-    plain = envmap_data(EnvmapSpec(path), (16, 32))
-    assert envmap_data(EnvmapSpec(path, lobes=(1.0,) * 6), (16, 32)) is plain
-    one_hot = [tuple(float(k == j) for k in range(6)) for j in range(6)]
-    parts = [envmap_data(EnvmapSpec(path, lobes=g), (16, 32)) for g in one_hot]
-    assert np.allclose(sum(parts), plain, rtol=1e-5)
-    for axis, data in zip(LOBE_AXES, parts, strict=True):
-        emitter = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(data[:, 1:-1]))})
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        radiance = []
-        for sign in (1.0, -1.0):  # light arriving from +axis, then from -axis
-            si.wi = mi.Vector3f(*(float(-sign * a) for a in axis))
-            radiance.append(float(np.array(emitter.eval(si)).mean()))
-        assert radiance[0] > 0.3 and radiance[1] == pytest.approx(0.0, abs=1e-6), (axis, radiance)
-    with pytest.raises(ValueError, match="lobes"):
-        EnvmapSpec(path, lobes=(1.0, -1.0, 1.0, 1.0, 1.0, 1.0))
-
-
 def test_casters_are_retargeted_exactly(renderer) -> None:  # type: ignore[no-untyped-def]
     """More shapes than caster slots, round robin: every map equals a fresh caster's."""
     from photoshape_flow.render.raycast import CASTER_SLOTS, RayCaster

@@ -9,7 +9,9 @@ a few pixels, the shape is only a look-alike), so the distance compares distribu
   resolution and half), which separate smooth plastic or metal from wood grain or woven fabric;
 - highlights: how far the bright tail of L* reaches above its median (90th and 99th percentiles minus
   the median), which separates glossy materials, whose few highlight pixels barely move the mean and
-  the standard deviation, from matte ones of the same colour.
+  the standard deviation, from matte ones of the same colour;
+- deep texture (when the fit reads the frame with a backbone): the moments of ImageNet features over
+  the region (`fit.deep_texture`), which tell patterns of one colour and contrast apart.
 
 Each term is divided by a fixed scale (a just-noticeable CIELAB difference of about 10 for colour,
 5 L* units per pixel for gradients) so the weights of `Weights` are comparable; the weights are
@@ -25,6 +27,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from photoshape_flow.fit.deep_texture import DeepStats, deep_distance
+
 LAB_SCALE = 10.0  # CIELAB units per unit of distance
 GRADIENT_SCALE = 5.0  # L* per pixel per unit of distance
 MIN_PIXELS = 12  # a region smaller than this has no statistics
@@ -38,18 +42,20 @@ class Weights:
     contrast: float = 0.5  # CIELAB standard deviation
     gradient: float = 0.5  # L* gradient-magnitude statistics, two scales
     highlight: float = 0.0  # L* upper percentiles above the median (counts once fitted: D38)
+    deep: float = 0.0  # backbone feature moments (`fit.deep_texture`; counts once fitted: D54)
 
 
 @dataclass(frozen=True)
 class Appearance:
     """Statistics of one region: CIELAB mean and std (3 each), gradient mean/std at two scales (4), the
-    L* 90th and 99th percentiles above the median (2)."""
+    L* 90th and 99th percentiles above the median (2); `deep`, the backbone's moments when measured."""
 
     lab_mean: np.ndarray
     lab_std: np.ndarray
     gradient: np.ndarray
     pixels: int
     highlight: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    deep: DeepStats | None = None
 
 
 def srgb_float(rgb: np.ndarray) -> np.ndarray:
@@ -118,21 +124,25 @@ def appearance(lab: np.ndarray, mask: np.ndarray) -> Appearance | None:
 
 
 def terms(a: Appearance, b: Appearance) -> np.ndarray:
-    """The four unweighted distance terms (colour, contrast, gradient, highlight), each over its fixed scale.
+    """The five unweighted distance terms (colour, contrast, gradient, highlight, deep), each over its scale.
 
-    Kept apart so the weights can be fitted on validation renders (`fit.calibrate`).
+    Kept apart so the weights can be fitted on validation renders (`fit.calibrate`). The deep term is
+    0 unless both regions carry backbone statistics (a fit without a backbone, or the lighting search,
+    which never measures it).
     """
+    deep = deep_distance(a.deep, b.deep) if a.deep is not None and b.deep is not None else 0.0
     return np.array([float(np.linalg.norm(a.lab_mean - b.lab_mean)) / LAB_SCALE,
                      float(np.linalg.norm(a.lab_std - b.lab_std)) / LAB_SCALE,
                      float(np.linalg.norm(a.gradient - b.gradient)) / GRADIENT_SCALE,
-                     float(np.linalg.norm(a.highlight - b.highlight)) / LAB_SCALE])
+                     float(np.linalg.norm(a.highlight - b.highlight)) / LAB_SCALE,
+                     deep])
 
 
 def weigh(values: np.ndarray, weights: Weights) -> float:
     """The weighted sum of `terms`."""
-    color, contrast, gradient, highlight = (float(v) for v in values)
+    color, contrast, gradient, highlight, deep = (float(v) for v in values)
     return (weights.color * color + weights.contrast * contrast + weights.gradient * gradient
-            + weights.highlight * highlight)
+            + weights.highlight * highlight + weights.deep * deep)
 
 
 def distance(a: Appearance, b: Appearance, weights: Weights = Weights()) -> float:

@@ -1,7 +1,7 @@
 """The fit cost's weights and its softmax temperature, fitted by conditional-logit maximum likelihood.
 
 The fit stage ranks a part's candidates by ``cost = w . x`` where x holds the candidate's distance
-terms (colour, contrast, gradient, highlight; `fit.appearance.terms`) and its ranking prior cost (-log prior),
+terms (colour, contrast, gradient, highlight, deep; `fit.appearance.terms`) and its ranking prior cost (-log prior),
 and turns costs into scores with ``softmax(-cost / T)`` (`fit.select.scores_of`). Given cases where
 the true candidate is known (validation renders made to look like photos, `pipeline.fit_calibration`),
 the weights and the temperature that make the true candidate most probable are the maximum of the
@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 from scipy.special import logsumexp
 
-TERMS = ("color", "contrast", "gradient", "highlight", "prior")  # the columns of a case's features
+TERMS = ("color", "contrast", "gradient", "highlight", "deep", "prior")  # the columns of a case's features
 L2 = 1.0  # penalty on |theta - centre|^2 against the summed log-likelihood (a prior worth ~1 case)
 
 

@@ -21,9 +21,9 @@ from photoshape_flow.align.partmap import resize_labels, zoom_to_fit
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import Appearance, Weights, appearance, erode, soften, terms, to_lab, weigh
 from photoshape_flow.fit.candidates import Candidate
-from photoshape_flow.fit.select import render_slots
+from photoshape_flow.fit.deep_texture import deep_stats
+from photoshape_flow.fit.select import rank_candidates, render_slots
 from photoshape_flow.imaging.squares import crop_square, square_box
-from photoshape_flow.vocab import LIGHTING_LOSSES
 
 MIN_BACKGROUND = 12  # background pixels needed to measure the photo's background colour
 OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
@@ -107,11 +107,15 @@ class FitScene:
     masks: dict[int, np.ndarray]  # observed part index -> region of the photo (eroded)
     blur: float = 0.0  # Gaussian sigma (pixels) applied to the photo and to every render (`soften`)
     background: np.ndarray = field(default_factory=lambda: np.ones(3, np.float32))  # the photo's, linear RGB
+    # sRGB frame -> backbone feature maps (`classify.feature_maps`): with it, regions carry deep texture
+    # statistics (`fit.deep_texture`); None: the deep term is 0
+    features: Callable[[np.ndarray], list[np.ndarray]] | None = None
 
     @classmethod
     def from_photo(cls, mesh: Any, camera: Any, photo_srgb: np.ndarray, labels: np.ndarray,
                    indices: Sequence[int], erode_pixels: int = 1, min_pixels: int = 12,
-                   blur: float = 0.0, foreground: np.ndarray | None = None) -> FitScene:
+                   blur: float = 0.0, foreground: np.ndarray | None = None,
+                   features: Callable[[np.ndarray], list[np.ndarray]] | None = None) -> FitScene:
         """`photo_srgb` uint8, `labels` (part index per pixel) and the photo's `foreground` at the same size.
 
         A part's region is its labels inside the foreground (the aligned map spills onto the
@@ -130,7 +134,7 @@ class FitScene:
         background = np.median(unblurred[away], axis=0) if int(away.sum()) >= MIN_BACKGROUND else np.ones(3)
         linear = soften(unblurred, blur)
         return cls(mesh, camera, linear, to_lab(lt.exposed_srgb(linear, 1.0)), masks, blur,
-                   np.asarray(background, np.float32))
+                   np.asarray(background, np.float32), features)
 
     def render(self, frame: FrameRenderer, materials: Sequence[Any], envmap: Any) -> np.ndarray:
         """A render of the scene's shape in the frame: (size, size, 4) un-premultiplied linear RGB and coverage."""
@@ -153,19 +157,38 @@ class FitScene:
         """
         return to_lab(lt.exposed_srgb(self.exposed_linear(rgba, exposure), 1.0))
 
+    def deep_maps(self, rgba: np.ndarray, exposure: float | np.ndarray) -> list[np.ndarray] | None:
+        """The backbone's feature maps of a render as the photo would show it (None without a backbone)."""
+        if self.features is None:
+            return None
+        return self.features(lt.exposed_srgb(self.exposed_linear(rgba, exposure), 1.0))
+
     @cached_property
     def photo_stats(self) -> dict[int, Appearance]:
-        """Each observed part's statistics in the photo (parts too small for statistics absent)."""
-        return {i: a for i, mask in self.masks.items() if (a := appearance(self.photo_lab, mask)) is not None}
+        """Each observed part's statistics in the photo (parts too small for statistics absent); with a
+        backbone, its deep texture statistics too (the photo is read once per scene)."""
+        maps = None if self.features is None else self.features(lt.exposed_srgb(self.photo_linear, 1.0))
+        return {i: with_deep(a, maps, mask) for i, mask in self.masks.items()
+                if (a := appearance(self.photo_lab, mask)) is not None}
+
+
+def with_deep(stats: Appearance, maps: Sequence[np.ndarray] | None, mask: np.ndarray) -> Appearance:
+    """`stats` with the region's deep texture statistics from a frame's feature maps (unchanged without)."""
+    return stats if maps is None else replace(stats, deep=deep_stats(maps, mask))
 
 
 def region_terms(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appearance], indices: Sequence[int],
-                 erode_pixels: int = 1) -> dict[int, np.ndarray | None]:
-    """Per part: the distance terms of its rendered region to its photo region (None when either is missing)."""
+                 erode_pixels: int = 1, maps: Sequence[np.ndarray] | None = None) -> dict[int, np.ndarray | None]:
+    """Per part: the distance terms of its rendered region to its photo region (None when either is missing).
+
+    `maps`: the render's backbone feature maps (`FitScene.deep_maps`), for the deep term.
+    """
     out: dict[int, np.ndarray | None] = {}
     for index in indices:
-        rendered = appearance(lab, erode(ids == index, erode_pixels))
-        out[index] = None if rendered is None or index not in photo else terms(rendered, photo[index])
+        mask = erode(ids == index, erode_pixels)
+        rendered = appearance(lab, mask)
+        out[index] = (None if rendered is None or index not in photo
+                      else terms(with_deep(rendered, maps, mask), photo[index]))
     return out
 
 
@@ -178,94 +201,49 @@ def region_distances(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appea
 
 def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
                    hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights,
-                   erode_pixels: int = 1, loss: str = "appearance") -> list[tuple[lt.Hypothesis, float, float]]:
+                   erode_pixels: int = 1) -> list[tuple[lt.Hypothesis, float, float]]:
     """(hypothesis, exposure, loss) of each (hypothesis, envmap spec): how well it explains the photo.
 
     Each hypothesis is rendered once with `materials` (one spec per mesh part); its exposure is the
-    closed-form fit of the per-part mean colours. Its loss (`lighting_losses`): "appearance", the
-    pixel-weighted mean part distance; "shading", `lt.shading_loss` (the layout of light and shadow
-    inside each part, blind to the materials' albedo). "shading-rotation" combines both and is chosen
-    by `pick_lighting`, not here.
+    closed-form fit of the per-part mean colours; its loss is the pixel-weighted mean part distance
+    (`region_distances`). Albedo-blind shading losses and lobe reshaping of the envmap were measured
+    and did not pay (docs/decisions.md D49, D50).
     """
-    if loss not in ("appearance", "shading"):
-        raise ValueError(f"score_lighting scores one loss, appearance or shading; got {loss!r}")
-    return [(h, scale, values[loss]) for h, scale, values in lighting_losses(
-        frame, scene, materials, hypotheses, weights, erode_pixels, (loss,))]
-
-
-def lighting_losses(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
-                    hypotheses: Sequence[tuple[lt.Hypothesis, Any]], weights: Weights, erode_pixels: int = 1,
-                    kinds: Sequence[str] = ("appearance",)) -> list[tuple[lt.Hypothesis, float, dict[str, float]]]:
-    """(hypothesis, exposure, {kind: loss}) of each (hypothesis, envmap spec), each rendered once (`score_lighting`)."""
     if not scene.photo_stats:
         raise ValueError("no observed part to light (every aligned part is too small)")
     ids = frame.part_ids(scene.mesh, scene.camera)
     photo = scene.photo_stats
     photo_means = lt.region_means(scene.photo_linear, scene.masks)
     rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
-    sigma = lt.SHADING_SIGMA * frame.size
-    shading = lt.photo_shading(scene.photo_linear, {i: scene.masks[i] for i in photo}, sigma) \
-        if "shading" in kinds else {}
     scored = []
     for hypothesis, envmap in hypotheses:
         rgba = scene.render(frame, materials, envmap)
         scale = lt.exposure(lt.region_means(rgba[..., :3], rendered_masks), photo_means)
-        values: dict[str, float] = {}
-        if "shading" in kinds:
-            values["shading"] = lt.shading_loss(scene.exposed_linear(rgba, scale), shading,
-                                                {i: (rendered_masks[i], scene.masks[i]) for i in photo}, sigma)
-        if "appearance" in kinds:
-            dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
-                                     erode_pixels)
-            sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
-            values["appearance"] = (sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values())
-                                    if sizes else math.inf)
-        scored.append((hypothesis, scale, values))
+        dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
+                                 erode_pixels)
+        sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
+        loss = sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values()) if sizes else math.inf
+        scored.append((hypothesis, scale, loss))
     return scored
-
-
-def pick_lighting(scored: Sequence[tuple[lt.Hypothesis, float, dict[str, float]]],
-                  loss: str) -> tuple[lt.Hypothesis, float, float]:
-    """The (hypothesis, exposure, loss) `loss` chooses among `lighting_losses`' results.
-
-    "appearance" and "shading": the lowest of that loss. "shading-rotation": each envmap's rotation by
-    the shading loss (where the light falls, whatever the first materials' albedo), then the envmap by
-    the appearance loss at that rotation (the light's colour and strength, which shading cannot see).
-    """
-    if loss != "shading-rotation":
-        return lt.best([(h, scale, values[loss]) for h, scale, values in scored])
-    finalists = []
-    for envmap_id in sorted({h.envmap_id for h, _, _ in scored}):
-        group = [item for item in scored if item[0].envmap_id == envmap_id]
-        try:
-            turned, _, _ = lt.best([(h, scale, values["shading"]) for h, scale, values in group])
-        except ValueError:  # no part shared by render and photo: the appearance alone decides
-            turned = None
-        finalists += [(h, scale, values["appearance"]) for h, scale, values in group if turned in (None, h)]
-    return lt.best(finalists)
 
 
 def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
                       envmaps: Mapping[int, Callable[[float], Any]], rotations: int, weights: Weights,
-                      keep: int | None = None, erode_pixels: int = 1,
-                      loss: str = "appearance") -> tuple[lt.Hypothesis, float, float, int]:
+                      keep: int | None = None, erode_pixels: int = 1) -> tuple[lt.Hypothesis, float, float, int]:
     """(hypothesis, exposure, loss, renders) of the envmap and rotation that best explain the photo.
 
     `envmaps`: envmap id -> its render spec at a rotation. Every envmap is tried at `rotations`
     azimuths; with more envmaps than `keep`, all are first screened at (up to) two azimuths and only
     the `keep` best are searched at every azimuth, so the cost grows with the library by two renders
-    per envmap rather than `rotations`. `loss`: one of `LIGHTING_LOSSES` (`pick_lighting`).
+    per envmap rather than `rotations`.
     """
-    if loss not in LIGHTING_LOSSES:
-        raise ValueError(f"unknown lighting loss {loss!r}; choose from {', '.join(LIGHTING_LOSSES)}")
-    kinds = ("appearance", "shading") if loss == "shading-rotation" else (loss,)
     angles = lt.rotations(rotations)
-    scored: dict[lt.Hypothesis, tuple[lt.Hypothesis, float, dict[str, float]]] = {}
+    scored: dict[lt.Hypothesis, tuple[lt.Hypothesis, float, float]] = {}
 
     def run(hypotheses: list[lt.Hypothesis]) -> None:
         fresh = [h for h in hypotheses if h not in scored]
-        for item in lighting_losses(frame, scene, materials, [(h, envmaps[h.envmap_id](h.rotation)) for h in fresh],
-                                    weights, erode_pixels, kinds):
+        for item in score_lighting(frame, scene, materials, [(h, envmaps[h.envmap_id](h.rotation)) for h in fresh],
+                                   weights, erode_pixels):
             scored[item[0]] = item
 
     ids = sorted(envmaps)
@@ -273,42 +251,13 @@ def estimate_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence
         run([lt.Hypothesis(e, r) for e in ids for r in angles[:: max(1, len(angles) // 2)][:2]])
 
         def screened(envmap_id: int) -> float:
-            try:
-                return pick_lighting([i for i in scored.values() if i[0].envmap_id == envmap_id], loss)[2]
-            except ValueError:
-                return math.inf
+            losses = [loss for h, _, loss in scored.values() if h.envmap_id == envmap_id and math.isfinite(loss)]
+            return min(losses, default=math.inf)
 
         ids = sorted(ids, key=lambda e: (screened(e), e))[:keep]
     run([lt.Hypothesis(e, r) for e in ids for r in angles])
-    h, scale, value = pick_lighting(list(scored.values()), loss)
+    h, scale, value = lt.best(list(scored.values()))
     return h, scale, value, len(scored)
-
-
-def correct_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any], envmap: Any,
-                     strength: float, erode_pixels: int = 1,
-                     per_channel: bool = False) -> tuple[tuple[float, ...], float, float, float]:
-    """(lobe gains, exposure, shading loss before, after) reshaping `envmap` toward the photo's light
-    (six grey gains, or with `per_channel` six RGB triples in a row, as `EnvmapSpec.lobes` takes them).
-
-    The scene is rendered once under each of the envmap's six lobes alone (`specs.LOBE_AXES`); the
-    gains come from `lt.fit_lobes` (where light and shadow fall inside each part, albedo removed), and
-    the exposure is solved in closed form on the gains' weighted sum, which is the render under the
-    corrected envmap (light transport is linear in the emitted radiance): six renders, none more.
-    """
-    from photoshape_flow.render.specs import LOBE_AXES
-
-    ids = frame.part_ids(scene.mesh, scene.camera)
-    photo = scene.photo_stats
-    rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
-    sigma = lt.SHADING_SIGMA * frame.size
-    basis = [scene.render(frame, materials, replace(envmap, lobes=tuple(float(k == j) for k in range(len(LOBE_AXES)))))
-             for j in range(len(LOBE_AXES))]
-    regions = {i: (rendered_masks[i], scene.masks[i]) for i in photo}
-    shading = lt.photo_shading(scene.photo_linear, {i: scene.masks[i] for i in photo}, sigma)
-    gains, before, after = lt.fit_lobes(basis, shading, regions, sigma, strength, per_channel)
-    corrected = sum(np.asarray(g, np.float32) * b[..., :3] for g, b in zip(gains, basis, strict=True))
-    scale = lt.exposure(lt.region_means(corrected, rendered_masks), lt.region_means(scene.photo_linear, scene.masks))
-    return tuple(round(float(g), 4) for g in np.ravel(gains)), scale, before, after
 
 
 @dataclass
@@ -338,9 +287,13 @@ def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, 
     return out
 
 
-def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float,
-                    erode_pixels: int = 1) -> dict[int, dict[int, np.ndarray | None]]:
-    """Part index -> {candidate material: its distance terms to the photo} with the renders at `exposure`."""
+def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float, erode_pixels: int = 1,
+                    maps: Sequence[Sequence[np.ndarray] | None] | None = None
+                    ) -> dict[int, dict[int, np.ndarray | None]]:
+    """Part index -> {candidate material: its distance terms to the photo} with the renders at `exposure`.
+
+    `maps`: each render's backbone feature maps (`FitScene.deep_maps`), for the deep term.
+    """
     photo = scene.photo_stats
     out: dict[int, dict[int, np.ndarray | None]] = {i: {} for i in renders.where}
     for k, rgba in enumerate(renders.renders):
@@ -348,7 +301,8 @@ def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float,
         if not shown:
             continue
         lab = scene.exposed_lab(rgba, exposure)
-        for index, value in region_terms(lab, renders.ids, photo, sorted(shown), erode_pixels).items():
+        for index, value in region_terms(lab, renders.ids, photo, sorted(shown), erode_pixels,
+                                         None if maps is None else maps[k]).items():
             out[index][shown[index]] = value
     return out
 
@@ -385,12 +339,13 @@ def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mappi
     the grid point where the sum of every part's cheapest cost is lowest. No new renders: each
     grid point re-exposes the same candidate renders (docs/decisions.md D42). A grid point may be
     per-channel factors (an exposure and a white balance; measured in experiments/fit_oracle and not
-    used by the stage, D43), and its exposures are then those factors.
+    used by the stage, D43), and its exposures are then those factors. The deep texture term is
+    read once per render, at the lighting's exposure, for every grid point: a backbone read per
+    render and exposure would cost a forward pass each for a term that a quarter stop barely moves.
     """
-    from photoshape_flow.fit.select import rank_candidates
-
     trials = [exposure * (float(f) if np.ndim(f) == 0 else np.asarray(f, np.float64)) for f in grid]
-    measured = [candidate_terms(renders, scene, e, erode_pixels) for e in trials]
+    maps = None if scene.features is None else [scene.deep_maps(rgba, exposure) for rgba in renders.renders]
+    measured = [candidate_terms(renders, scene, e, erode_pixels, maps) for e in trials]
     parts = [i for i in candidates if candidates[i]]
     costs: list[dict[int, dict[int, float]]] = []
     for terms_at in measured:

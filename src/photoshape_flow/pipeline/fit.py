@@ -4,9 +4,7 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
 
 1. Lighting of the exemplar (`estimate_lighting`): every training envmap at `rotations` azimuths,
    each rendered with the classifier's rank-1 materials at the exemplar's reference pair's camera,
-   exposure solved in closed form (`fit.lighting`); the lowest appearance loss wins; with
-   `lighting_correction="lobes"` the winner's six lobes are re-weighted to the photo's shading
-   (`correct_lighting`, D50). Stored in
+   exposure solved in closed form (`fit.lighting`); the lowest appearance loss wins. Stored in
    ``exemplar.meta["fit_lighting"]`` with the key of its inputs and reused by every pair of the
    exemplar until those inputs change.
 2. Candidates per observed part (`fit.candidates`): the ranking's top-K, the colour-nearest material
@@ -49,7 +47,6 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.scene import (
-    correct_lighting,
     estimate_lighting,
     render_candidates,
     select_profiled,
@@ -147,16 +144,9 @@ def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
                                    for i, c in candidates.items() if c}}
         materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
         h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
-                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode,
-                                                    ctx.cfg.lighting_loss)
+                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode)
         light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
                  "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
-    if ctx.cfg.lighting_correction != "none" and light["envmap_id"] is not None:
-        lobes, scale, before, after = correct_lighting(ctx.frame, data.scene, materials, ctx.light_envmap(light),
-                                                       ctx.cfg.lighting_lobe_strength, ctx.cfg.erode,
-                                                       per_channel=ctx.cfg.lighting_correction == "lobes-rgb")
-        light.update(lobes=list(lobes), exposure=round(scale, 6),
-                     shading_loss=[round(before, 6), round(after, 6)])
     return light
 
 

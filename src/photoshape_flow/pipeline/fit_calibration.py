@@ -191,7 +191,7 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Set
     camera = Camera(spec.camera.azimuth, spec.camera.elevation, spec.camera.distance, spec.camera.fov)
     present = sorted(int(i) for i in np.unique(labels) if i > 0 and int(i) in truth)
     scene = FitScene.from_photo(mesh, camera, rgb, labels, present, ctx.cfg.erode, blur=ctx.cfg.blur,
-                                foreground=foreground)
+                                foreground=foreground, features=ctx.features)
     counts = {"parts": len(scene.masks), "true_in_candidates": 0}
     rows = ranker.rank(rgb, {i: (labels == i) & foreground for i in scene.masks})
     if not rows:
@@ -224,7 +224,7 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Set
 def hand_set(cfg: Any) -> np.ndarray:
     """The profile's weights in `fit.calibrate.TERMS` order (temperature 1)."""
     return np.array([cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight,
-                     cfg.prior_weight], np.float64)
+                     cfg.deep_weight, cfg.prior_weight], np.float64)
 
 
 def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:

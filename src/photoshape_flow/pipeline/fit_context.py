@@ -8,6 +8,7 @@ and the experiments build the same context and pair data around validation rende
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,6 +17,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.align.partmap import exemplar_at, resize_labels
+from photoshape_flow.classify.feature_maps import FeatureMaps
 from photoshape_flow.db import models as m
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.scene import FitScene, FrameRenderer
@@ -26,16 +28,17 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 METHOD = "fit"
-CODE_VERSION = "fit-7"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
+CODE_VERSION = "fit-8"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
 #                         fit-4: renders blended with the photo's background at the silhouette (D41);
 #                         fit-5: each candidate judged at its own best exposure (D42);
 #                         fit-6: weights calibrated on photos degraded at the exemplars' size (D45);
-#                         fit-7: rows carry the calibrated score as their posterior (the gallery's confidence)
+#                         fit-7: rows carry the calibrated score as their posterior (the gallery's confidence);
+#                         fit-8: the deep texture term (D54)
 
 
 def weights_of(cfg: FitConfig) -> Weights:
     """The profile's hand-set distance weights (the fallback when no fitted ones are stored)."""
-    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight)
+    return Weights(cfg.color_weight, cfg.contrast_weight, cfg.gradient_weight, cfg.highlight_weight, cfg.deep_weight)
 
 
 # -- what one pair is made of ----------------------------------------------------------------------------
@@ -82,6 +85,7 @@ class FitContext:
         # fitted weights and temperature (`pipeline.fit_calibration`, D34); None: the profile's hand-set ones
         self.calibration: dict[str, Any] | None = None
         self._frame: FrameRenderer | None = None
+        self._features: FeatureMaps | None = None
         self._specs: dict[int, Any] = {}
         self._meshes: dict[int, Any] = {}
 
@@ -94,6 +98,16 @@ class FitContext:
                 self._renderer = Renderer(resolve=self.store.resolve)
             self._frame = FrameRenderer(self._renderer, self.cfg.size, self.cfg.spp)
         return self._frame
+
+    @property
+    def features(self) -> Callable[[np.ndarray], list[np.ndarray]] | None:
+        """The backbone that reads frames for the deep texture term, built once (None when the profile's
+        `texture_backbone` is "none")."""
+        if self.cfg.texture_backbone == "none":
+            return None
+        if self._features is None:
+            self._features = FeatureMaps(self.cfg.texture_backbone)
+        return self._features.maps
 
     def spec(self, material_id: int | None) -> Any:
         """The render spec of a material (None: the part's built-in material)."""
@@ -114,10 +128,8 @@ class FitContext:
 
     def light_envmap(self, light: dict[str, Any]) -> Any:
         """The render spec of an exemplar's stored lighting (`pipeline.fit.lighting_estimate`): its training
-        envmap at its rotation, reshaped by its lobe gains when the lighting was corrected."""
-        spec = self.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
-        lobes = light.get("lobes")
-        return spec if spec is None or not lobes else dataclasses.replace(spec, lobes=tuple(lobes))
+        envmap at its rotation."""
+        return self.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
 
     def mesh(self, shape: m.Shape) -> Any:
         from photoshape_flow.geometry.mesh import ShapeMesh
@@ -134,7 +146,8 @@ class FitContext:
         if self.calibration is None:
             return weights_of(self.cfg)
         w = self.calibration["weights"]
-        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]), float(w["highlight"]))
+        return Weights(float(w["color"]), float(w["contrast"]), float(w["gradient"]), float(w["highlight"]),
+                       float(w.get("deep", 0.0)))
 
     @property
     def prior_weight(self) -> float:
@@ -169,6 +182,7 @@ def weights_report(ctx: FitContext) -> dict[str, Any]:
     out: dict[str, Any] = {"source": "hand-set" if ctx.calibration is None else "fitted",
                            "color": round(w.color, 4), "contrast": round(w.contrast, 4),
                            "gradient": round(w.gradient, 4), "highlight": round(w.highlight, 4),
+                           "deep": round(w.deep, 4),
                            "prior": round(ctx.prior_weight, 4),
                            "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
     if ctx.calibration is not None:
@@ -210,5 +224,5 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
     observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
     scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.blur,
-                                foreground=foreground)
+                                foreground=foreground, features=ctx.features)
     return PairData(pair, scene, rows, source_hash)

@@ -54,7 +54,7 @@ from photoshape_flow.render.scene import (
     mitsuba_uvs,
     sensor_dict,
 )
-from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, latlong_directions, lobe_gains
+from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec
 
 ENVMAP_RESOLUTION = (256, 512)  # (height, width) every envmap is resampled to; the demo's own size
 MIN_SLOTS = 4
@@ -136,17 +136,8 @@ def _white_sky(resolution: tuple[int, int]) -> np.ndarray:
     return _pad_columns(np.ones((*resolution, 3), np.float32))
 
 
-@lru_cache(maxsize=32)
-def _lobed_data(path: str, mtime_ns: int, resolution: tuple[int, int], lobes: tuple[float, ...]) -> np.ndarray:
-    """`_envmap_data` times the lobes' gain (`specs.lobe_gains`): cached, so every render of one lighting
-    hands the pool the same array and it uploads it once."""
-    gain = lobe_gains(latlong_directions(*resolution), lobes).astype(np.float32)
-    gain = _pad_columns(gain if gain.ndim == 3 else gain[..., None])
-    return aligned(_envmap_data(path, mtime_ns, resolution) * gain)
-
-
 def envmap_data(envmap: EnvmapSpec | None, resolution: tuple[int, int] = ENVMAP_RESOLUTION) -> np.ndarray:
-    """The pool's ``emitter.data`` for an envmap (cached by path, mtime and lobes); radiance 1 when None."""
+    """The pool's ``emitter.data`` for an envmap (cached by path and mtime); radiance 1 when None."""
     if envmap is None:
         return _white_sky(tuple(resolution))
     path = Path(envmap.path)
@@ -154,8 +145,6 @@ def envmap_data(envmap: EnvmapSpec | None, resolution: tuple[int, int] = ENVMAP_
         mtime = path.stat().st_mtime_ns
     except OSError as exc:
         raise ValueError(f"{path}: environment map file missing") from exc
-    if envmap.lobes is not None and any(g != 1.0 for g in envmap.lobes):
-        return _lobed_data(str(path), mtime, tuple(resolution), envmap.lobes)
     return _envmap_data(str(path), mtime, tuple(resolution))
 
 

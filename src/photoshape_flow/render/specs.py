@@ -99,53 +99,14 @@ class UVTransform:
 
 @dataclass(frozen=True)
 class EnvmapSpec:
-    """An environment map (lat-long .exr/.hdr, +y up) with a radiance scale and a rotation about +y.
-
-    `lobes`: gains of six smooth lobes in the map's own frame (`lobe_gains`: +x, -x, +y, -y, +z, -z),
-    six grey gains or six RGB triples in a row, which reshape where its light comes from (and its
-    colour per direction); None (or all 1) leaves the map as it is. Fit's lighting
-    correction (`fit.lighting.fit_lobes`) finds them for a photo lit by a map that is not in the library.
-    """
+    """An environment map (lat-long .exr/.hdr, +y up) with a radiance scale and a rotation about +y."""
 
     path: Path
     scale: float = 1.0
     rotation: float = 0.0
-    lobes: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "path", Path(self.path))
-        if self.lobes is not None:
-            lobes = tuple(float(g) for g in self.lobes)
-            if len(lobes) not in (len(LOBE_AXES), 3 * len(LOBE_AXES)) or not all(math.isfinite(g) and g >= 0.0
-                                                                              for g in lobes):
-                raise ValueError(f"envmap lobes: {len(LOBE_AXES)} (grey) or {3 * len(LOBE_AXES)} (RGB) finite "
-                                 f"non-negative gains expected, got {self.lobes!r}")
-            object.__setattr__(self, "lobes", lobes)
-
-
-# The six lobes max(0, d . axis)^2 of the axes sum to |d|^2 = 1 for every direction d: gains of 1 leave an
-# envmap unchanged, and a render under gains g is the g-weighted sum of the renders under each lobe alone
-# (light transport is linear in the emitted radiance), which is what lets `fit.lighting.fit_lobes` fit
-# them from six renders.
-LOBE_AXES: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
-                                                     (0.0, -1.0, 0.0), (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
-
-
-def latlong_directions(height: int, width: int) -> np.ndarray:
-    """(height, width, 3) unit directions of a lat-long map's texel centres, in Mitsuba's ``envmap``
-    convention (u = atan2(x, -z) / 2 pi, v = acos(y) / pi; +y up), in the map's own frame."""
-    theta = (np.arange(height, dtype=np.float64) + 0.5) / height * np.pi
-    phi = (np.arange(width, dtype=np.float64) + 0.5) / width * 2.0 * np.pi
-    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
-    return np.stack(np.broadcast_arrays(st * np.sin(phi)[None, :], ct, -st * np.cos(phi)[None, :]), axis=-1)
-
-
-def lobe_gains(directions: np.ndarray, lobes: Any) -> np.ndarray:
-    """The radiance factor sum_k lobes[k] * max(0, d . axis_k)^2 for each direction (..., 3): (...) for six
-    grey gains, (..., 3) for six RGB triples."""
-    weights = np.maximum(np.asarray(directions, np.float64) @ np.asarray(LOBE_AXES).T, 0.0) ** 2
-    gains = np.asarray(lobes, np.float64)
-    return weights @ (gains if gains.size == len(LOBE_AXES) else gains.reshape(len(LOBE_AXES), 3))
 
 
 def srgb_to_linear(value: Any) -> np.ndarray:
