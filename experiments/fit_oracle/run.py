@@ -211,7 +211,7 @@ class Oracle:
         camera = Camera(spec.camera.azimuth, spec.camera.elevation, spec.camera.distance, spec.camera.fov)
         present = sorted(int(i) for i in np.unique(labels) if i > 0 and int(i) in truth)
         scene = sc.FitScene.from_photo(mesh, camera, rgb, labels, present, self.cfg.erode, blur=self.cfg.blur,
-                                       foreground=foreground)
+                                       foreground=foreground, features=self.ctx.features)
         rows = self.ranker.rank(rgb, {i: (labels == i) & foreground for i in scene.masks})
         if not rows:
             return []
