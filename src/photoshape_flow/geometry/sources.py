@@ -31,7 +31,7 @@ from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip
 from photoshape_flow.geometry.obj import referenced_files, resolve_inside
 from photoshape_flow.geometry.raw import BadShapeError
 from photoshape_flow.geometry.sh3f import read_catalog
-from photoshape_flow.inputs import walk_inputs
+from photoshape_flow.inputs import Fingerprints, fingerprint, walk_inputs
 from photoshape_flow.sidecar import parse_document
 
 MODEL_SUFFIXES = {".obj": "obj", ".gltf": "gltf", ".glb": "glb"}
@@ -287,6 +287,7 @@ class Materialized:
     root: Path
     sha256: str
     files: list[str]
+    fingerprints: Fingerprints = field(default_factory=dict)  # plain files: taken before hashing
 
 
 @contextmanager
@@ -303,8 +304,9 @@ def materialize(item: ShapeItem, limits: ArchiveLimits | None = None) -> Iterato
         else:
             deps = []
         paths = [model, *[d for d in deps if d != model]]
+        before = fingerprint(paths)
         sha = _file_hash(paths, model.parent)
-        yield Materialized(model=model, root=root, sha256=sha, files=[str(p) for p in paths])
+        yield Materialized(model=model, root=root, sha256=sha, files=[str(p) for p in paths], fingerprints=before)
         return
     from photoshape_flow.geometry.sh3f import model_files
 
