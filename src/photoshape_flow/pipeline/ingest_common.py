@@ -147,6 +147,7 @@ class IngestLimits:
     max_texture_pixels: int = 64 * 1024 * 1024
     max_exemplar_aspect: float = 20.0  # long side / short side of a product photo; strips are refused unread
     timeout_s: float = 600.0  # per shape / envmap in the isolated worker
+    memory_bytes: int = 6 * 1024**3  # per shape / envmap: the isolated worker's data segment (a bomb's ceiling)
     archive: ArchiveLimits = field(default_factory=ArchiveLimits)
 
     @classmethod

@@ -33,6 +33,7 @@ from photoshape_flow.pipeline.ingest_common import (
     guard_item,
     hash_fraction,
     one_line,
+    rejection_reason,
     resolve_settings,
     store_for,
 )
@@ -130,6 +131,9 @@ def _ingest_file(
     except (WorkerCrashedError, WorkerTimeoutError) as exc:
         _record_failure(url, summary, label, row, STATUS_FAILED, f"decoder {one_line(exc)}", existing)
         return
+    except MemoryError as exc:
+        _record_failure(url, summary, label, row, STATUS_REJECTED, rejection_reason(exc), existing)
+        return
     except Exception as exc:
         logger.debug("%s: unexpected error", label, exc_info=True)
         _record_failure(url, summary, label, row, STATUS_FAILED, f"{type(exc).__name__}: {one_line(exc)}", existing)
@@ -184,7 +188,7 @@ def ingest_envmaps(
     summary = IngestSummary("envmaps")
     entries = list(walk_inputs(paths, HDR_SUFFIXES))
     seen: dict[str, Path] = {}
-    worker = IsolatedWorker(limits.timeout_s) if isolate else None
+    worker = IsolatedWorker(limits.timeout_s, limits.memory_bytes) if isolate else None
     try:
         for done, found in enumerate(entries, start=1):
             path = found.path

@@ -46,6 +46,7 @@ from photoshape_flow.pipeline.ingest_common import (
     adopt_renamed_row,
     guard_item,
     one_line,
+    rejection_reason,
     resolve_settings,
     split_for,
     store_for,
@@ -186,6 +187,9 @@ def _ingest_item(
     except (WorkerCrashedError, WorkerTimeoutError) as exc:
         _record_failure(url, summary, label, row, STATUS_FAILED, f"importer {one_line(exc)}", existing)
         return
+    except MemoryError as exc:
+        _record_failure(url, summary, label, row, STATUS_REJECTED, rejection_reason(exc), existing)
+        return
     except OSError as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, f"unreadable ({one_line(exc)})", existing)
         return
@@ -258,7 +262,7 @@ def ingest_shapes(
                             license=license, attribution=attribution, archive_limits=limits.archive)
     seen: dict[tuple[str, str], str] = {}
     batch_ids = {item.source_id for item in items if isinstance(item, ShapeItem)}
-    worker = IsolatedWorker(limits.timeout_s) if isolate else None
+    worker = IsolatedWorker(limits.timeout_s, limits.memory_bytes) if isolate else None
     try:
         for done, item in enumerate(items, start=1):
             if isinstance(item, RejectedInput):
