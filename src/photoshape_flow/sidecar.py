@@ -97,14 +97,18 @@ def check_numbers(value: Any, depth: int = 0) -> None:
             check_numbers(item, depth + 1)
 
 
-def parse_text(text: str, kind: str, max_depth: int = MAX_DEPTH) -> Any:
-    """`text` parsed as ``json`` or ``toml`` within the depth and number limits, or DocumentError."""
+def parse_text(text: str, kind: str, max_depth: int = MAX_DEPTH, finite_only: bool = True) -> Any:
+    """`text` parsed as ``json`` or ``toml`` within the depth and number limits, or DocumentError.
+
+    `finite_only=False` lets NaN, infinities and large magnitudes through (integer digits stay
+    bounded) for formats that judge their numbers field by field, one entry at a time.
+    """
     depth = nesting_depth(text, toml=kind == "toml")
     if depth > max_depth:
         raise DocumentError(f"nested {depth} levels deep (limit {max_depth})")
     try:
         if kind == "json":
-            data = json.loads(text, parse_int=_bounded_int, parse_constant=_no_constant)
+            data = json.loads(text, parse_int=_bounded_int, **({"parse_constant": _no_constant} if finite_only else {}))
         else:
             data = tomllib.loads(text)
     except DocumentError:
@@ -120,7 +124,8 @@ def parse_text(text: str, kind: str, max_depth: int = MAX_DEPTH) -> Any:
             raise DocumentError(f"a number with more than {sys.get_int_max_str_digits()} digits "
                                 f"(limit {MAX_DIGITS})") from exc
         raise DocumentError(f"a number that cannot be read ({str(exc).splitlines()[0][:120]})") from exc
-    check_numbers(data)
+    if finite_only:
+        check_numbers(data)
     return data
 
 

@@ -133,11 +133,17 @@ def _catalog_items(
         with SafeZip(path, limits) as archive:
             catalog = read_catalog(archive)
             sizes = {name.lower(): archive.find(name).file_size for name in archive.names()}  # type: ignore[union-attr]
-    except (BadShapeError, OSError) as exc:
+    except Exception as exc:  # BadShapeError, OSError, and whatever a corrupt zip raises (one catalog, one line)
         # a catalog-level row (source_id: the catalog's stem), so the reject is queryable like others
-        yield RejectedInput(str(path), str(exc), source or "sweethome3d", path.stem, path.stem)
+        reason = (str(exc) if isinstance(exc, BadShapeError | OSError)
+                  else f"unreadable catalog ({type(exc).__name__}: {exc})")
+        yield RejectedInput(str(path), reason.splitlines()[0] if reason.strip() else type(exc).__name__,
+                            source or "sweethome3d", path.stem, path.stem)
         return
     src = source or "sweethome3d"
+    if not catalog.entries and not catalog.invalid:
+        yield RejectedInput(str(path), "no furniture in the catalog (no model#N entries)", src, path.stem, path.stem)
+        return
     for label, reason in catalog.invalid:
         yield RejectedInput(label, reason, src, f"{path.stem}/{label.split(':', 1)[-1]}")
     for entry in catalog.entries:

@@ -266,6 +266,9 @@ def scan_material(folder: Path, *, substance: str | None = None, source: str | N
     for channel, filename in explicit.items():
         if channel not in (*CHANNELS, "gloss", "arm"):
             raise BadMaterialError(f"maps: unknown channel {channel!r}")
+        hidden = hidden_character(str(filename))
+        if hidden is not None:  # a NUL would reach os calls as a ValueError; a newline would split the reason
+            raise BadMaterialError(f"maps.{channel}: file name contains {hidden}")
         link = link_refusal(folder / str(filename), folder)
         if link is not None:
             raise BadMaterialError(f"maps.{channel}: {link}")
