@@ -15,7 +15,6 @@ from sqlalchemy.orm import Session
 from photoshape_flow.db import models as m
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, ResolvedProfile, resolve_profile
 
-
 DIED = "died"  # the status of a run whose process ended without recording its end
 
 

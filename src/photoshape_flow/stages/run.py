@@ -164,7 +164,6 @@ def _after_wait(before: StageReport, again: StageReport) -> StageReport:
 
 def start_run(ctx: StageContext, resolved: ResolvedProfile, stages: Sequence[str], origin: str) -> int:
     from photoshape_flow.db import models as m
-
     from photoshape_flow.db.holder import this_process
     from photoshape_flow.pipeline.runs import mark_dead_runs
 
