@@ -60,9 +60,11 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
     """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage, and
     (`changes`, a `FitChanges` as a dict) how many parts the run's fit changed."""
     from photoshape_flow.pipeline.progress import assumed_profile
+    from photoshape_flow.pipeline.runs import mark_dead_runs
     from photoshape_flow.stages import stage_progress
 
     with session_scope(get_settings().resolved_database_url) as session:
+        mark_dead_runs(session)  # the summary's counts never include a killed run as running
         progress = stage_progress(session)
         assumed = assumed_profile(session)
     lines = [f"# {title}", "", f"Counts assume {assumed.describe()}.", "",

@@ -168,3 +168,27 @@ def test_corrupted_download_is_rejected(make_store: MakeStore) -> None:
         other.resolve(ref)
     assert not other.path(ref).exists()  # nothing damaged entered the cache
     assert make_store().read_bytes(ref) == b"genuine bytes"  # the writer's verified cached copy is intact
+
+
+def test_a_url_whose_backend_is_not_installed_is_one_line(settings_env: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """`s3://` without s3fs: one line naming the package, exit 1, no ImportError traceback."""
+    import importlib.util
+
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.store.remote import FsspecBackend, MissingBackendError, missing_backend
+
+    if importlib.util.find_spec("s3fs") is not None:
+        pytest.skip("s3fs is installed here")
+    monkeypatch.setenv("PHOTOSHAPE_BLOB_ROOT", "s3://user:se@cret@bucket/blobs")
+    get_settings.cache_clear()
+    result = CliRunner().invoke(app, ["ingest", "materials", str(settings_env)])
+    flat = " ".join(result.output.split())
+    assert result.exit_code == 1 and "Traceback" not in flat and "se@cret" not in flat, result.output
+    assert "s3:// backend needs the s3fs package, which is not installed (pip install s3fs)" in flat, flat
+    assert missing_backend("memory://x") is None
+    with pytest.raises(MissingBackendError, match="pip install s3fs"):
+        FsspecBackend("s3://bucket/blobs", settings_env / "cache")

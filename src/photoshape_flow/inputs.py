@@ -72,16 +72,30 @@ def _walk(folder: Path) -> list[Path]:
     return sorted(entries)
 
 
+def link_refusal(path: Path, root: Path | None) -> str | None:
+    """Why a symbolic link may not be followed (None for a plain entry or a link that stays inside `root`).
+
+    The one link policy of every collection (shapes, exemplars, envmaps, material maps, sidecars and
+    folders): a link must resolve inside the ingested folder, checked from the link alone, before
+    anything opens its target; `/etc/passwd` behind an `albedo.png` is never read.
+    """
+    if not path.is_symlink():
+        return None
+    if not path.exists():
+        return "broken symbolic link"
+    if root is not None and not path.resolve().is_relative_to(root.resolve()):
+        return f"symbolic link to {path.resolve()}, outside the ingested folder {root}"
+    return None
+
+
 def check_entry(path: Path, root: Path | None) -> str | None:
     """Why a path with a supported suffix cannot be ingested, or None when it is a usable file."""
     hidden = hidden_character(path.name if root is None else path.relative_to(root).as_posix())
     if hidden is not None:
         return f"name contains {hidden}; rename the file"
-    if path.is_symlink():
-        if not path.exists():
-            return "broken symbolic link"
-        if root is not None and not path.resolve().is_relative_to(root.resolve()):
-            return f"symbolic link to {path.resolve()}, outside the ingested folder {root}"
+    link = link_refusal(path, root)
+    if link is not None:
+        return link
     if path.is_dir():
         return "a folder, not a file (its name ends like a supported file)"
     if not path.is_file():
@@ -118,3 +132,37 @@ def walk_inputs(paths: Iterable[str | Path], suffixes: set[str]) -> Iterator[Fou
             yield Found(path, reason=f"unsupported file type {path.suffix or '(none)'!r} (expected {wanted})")
             continue
         yield Found(path, None, check_entry(path, None))
+
+
+class ChangedWhileReadingError(ValueError):
+    """An input file was rewritten between its hashing and its last read: its row would lie."""
+
+
+Fingerprints = dict[Path, tuple[int, ...]]
+
+
+def fingerprint(paths: Iterable[Path]) -> Fingerprints:
+    """Device, inode, size and modification/change times of each file, taken before it is hashed.
+
+    The content hash is computed from one read of a file and its data from another (the decoder's,
+    the store's copy); a rewrite in between would store a hash that matches neither version. The
+    change time moves on every write and rename, so comparing these after the last read
+    (`check_unchanged`) proves both reads saw the same file, without reading it a third time.
+    """
+    out: Fingerprints = {}
+    for path in paths:
+        stat = os.stat(path)
+        out[Path(path)] = (stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)
+    return out
+
+
+def check_unchanged(before: Fingerprints) -> None:
+    """ChangedWhileReadingError naming the first file whose fingerprint moved since `before` was taken."""
+    try:
+        now = fingerprint(before)
+    except OSError as exc:
+        raise ChangedWhileReadingError(f"{exc.filename or 'a file'} disappeared while being read") from exc
+    for path, seen in before.items():
+        if now[path] != seen:
+            raise ChangedWhileReadingError(f"{path.name} changed while being read; ingest it again once it is "
+                                           "completely written")

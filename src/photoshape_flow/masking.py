@@ -4,7 +4,12 @@
 that URL is printed by `photoshape status`, `db current`, `doctor` and connection errors, and can
 reach a log line, which a Prefect worker forwards to the Prefect API for anyone with the UI to read.
 `mask_password` replaces the password in every URL (and in every ``password=...`` of a libpq
-connection string) within a text, leaving user, host and database readable.
+connection string) within a text, leaving user, host and database readable. URLs are parsed, not
+matched by a pattern: a URL runs from its ``scheme://`` to the next blank or quote, its user
+information ends at its *last* ``@`` and the password starts at the user's first ``:``, so a
+password holding ``@``, ``:`` or ``/`` (escaped or not, as libpq and SQLAlchemy accept them)
+is masked whole. A URL whose path or query holds an ``@`` may be masked too generously, never
+too little.
 `PasswordMaskFilter` is a `logging.Filter` applying it to log records. `install_password_masking`
 puts it in two places: on every handler configured so far (the root's, the CLI's, and Prefect's
 console and API log handlers, which forward records to the Prefect UI), where it sees every record a
@@ -22,17 +27,44 @@ import re
 from typing import Any
 
 MASK = "***"
-# scheme://user:PASSWORD@host: the password runs to the first "@", as in SQLAlchemy's URL parser
-_URL_PASSWORD = re.compile(r"(?P<head>\b[A-Za-z][A-Za-z0-9+.\-]*://[^:/?#@\s]*:)[^@\s]*(?=@)")
+# where a URL starts, and where it ends (blanks and quotes never belong to a URL as printed)
+_SCHEME = re.compile(r"\b[A-Za-z][A-Za-z0-9+.\-]*://")
+_URL_END = re.compile(r"[\s'\"<>`]")
 # libpq key/value form: password=secret or password='se cret'
 _KEYWORD_PASSWORD = re.compile(r"(?P<head>\b(?:password|passwd|pwd)\s*=\s*)(?:'(?:[^'\\]|\\.)*'|[^\s'\"]+)",
                                re.IGNORECASE)
 
 
+def mask_url(rest: str) -> str:
+    """What follows a ``scheme://`` with its password masked: ``user:***@host...``, unchanged without one.
+
+    The user information is everything before the last ``@``; the user is what precedes its first
+    ``:`` and everything after that colon is the password, whatever it holds.
+    """
+    at = rest.rfind("@")
+    if at < 0:
+        return rest
+    user, colon, _password = rest[:at].partition(":")
+    if not colon or "/" in user:
+        return rest
+    return f"{user}:{MASK}{rest[at:]}"
+
+
 def mask_password(text: str) -> str:
     """`text` (a URL, or any message holding URLs or connection strings) with passwords as ``***``."""
-    text = _URL_PASSWORD.sub(lambda m: m.group("head") + MASK, text)
-    return _KEYWORD_PASSWORD.sub(lambda m: m.group("head") + MASK, text)
+    out: list[str] = []
+    position = 0
+    for match in _SCHEME.finditer(text):
+        if match.start() < position:  # a scheme inside a URL already masked (e.g. a redirect parameter)
+            continue
+        start = match.end()
+        end_match = _URL_END.search(text, start)
+        end = len(text) if end_match is None else end_match.start()
+        out.append(text[position:start])
+        out.append(mask_url(text[start:end]))
+        position = end
+    out.append(text[position:])
+    return _KEYWORD_PASSWORD.sub(lambda m: m.group("head") + MASK, "".join(out))
 
 
 class PasswordMaskFilter(logging.Filter):

@@ -6,17 +6,26 @@ every sidecar (material.json/.toml) and glTF JSON is read through `parse_documen
 checked before reading, the bracket depth is measured by a linear scan before parsing (strings and
 comments skipped), and anything over a limit or malformed raises `DocumentError`, a ValueError with
 one line that says why; the caller names the file.
+
+Numbers are bounded too: Python refuses to convert integers of more than 4300 digits with a bare
+ValueError (``Exceeds the limit (4300 digits)``) that escaped every ``except JSONDecodeError``, and
+a 1e400 or NaN reaches a float column as infinity or NaN. So integers are read through a digit
+limit, and every parsed number (JSON and TOML alike) must be finite and within `MAX_MAGNITUDE`;
+anything else is a DocumentError naming the number.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
 
 MAX_BYTES = 1024 * 1024  # a sidecar is a few hundred bytes; a megabyte is already absurd
 MAX_DEPTH = 32  # no sidecar or glTF nests deeper than a handful of levels
+MAX_DIGITS = 24  # a 64-bit integer has at most 20 digits; longer ones are no sidecar's or glTF's
+MAX_MAGNITUDE = 1e30  # beyond it no scale, count, offset or colour of a sidecar or glTF means anything
 
 
 class DocumentError(ValueError):
@@ -54,19 +63,70 @@ def nesting_depth(text: str, toml: bool = False) -> int:
     return deepest
 
 
-def parse_text(text: str, kind: str, max_depth: int = MAX_DEPTH) -> Any:
-    """`text` parsed as ``json`` or ``toml`` within the depth limit, or DocumentError."""
+def _bounded_int(digits: str) -> int:
+    """A JSON integer, refused before conversion when it has more than `MAX_DIGITS` digits."""
+    count = len(digits.lstrip("+-"))
+    if count > MAX_DIGITS:
+        raise DocumentError(f"a number with {count} digits (limit {MAX_DIGITS})")
+    return int(digits)
+
+
+def _no_constant(name: str) -> Any:
+    """JSON's non-standard NaN / Infinity / -Infinity, which Python's parser would accept."""
+    raise DocumentError(f"non-finite number {name} (not allowed)")
+
+
+def check_numbers(value: Any, depth: int = 0) -> None:
+    """DocumentError when any number inside a parsed document is non-finite or absurdly large.
+
+    Recursion is bounded: documents reach here only after the depth scan.
+    """
+    if isinstance(value, bool):
+        return
+    if isinstance(value, int | float):
+        if value != value or value in (float("inf"), float("-inf")):
+            raise DocumentError(f"non-finite number {value} (not allowed)")
+        if abs(value) > MAX_MAGNITUDE:
+            shown = f"{value:.3g}" if isinstance(value, float) else f"with {len(str(abs(value)))} digits"
+            raise DocumentError(f"a number {shown} beyond the limit {MAX_MAGNITUDE:.0e}")
+    elif isinstance(value, dict):
+        for item in value.values():
+            check_numbers(item, depth + 1)
+    elif isinstance(value, list):
+        for item in value:
+            check_numbers(item, depth + 1)
+
+
+def parse_text(text: str, kind: str, max_depth: int = MAX_DEPTH, finite_only: bool = True) -> Any:
+    """`text` parsed as ``json`` or ``toml`` within the depth and number limits, or DocumentError.
+
+    `finite_only=False` lets NaN, infinities and large magnitudes through (integer digits stay
+    bounded) for formats that judge their numbers field by field, one entry at a time.
+    """
     depth = nesting_depth(text, toml=kind == "toml")
     if depth > max_depth:
         raise DocumentError(f"nested {depth} levels deep (limit {max_depth})")
     try:
-        return json.loads(text) if kind == "json" else tomllib.loads(text)
+        if kind == "json":
+            data = json.loads(text, parse_int=_bounded_int, **({"parse_constant": _no_constant} if finite_only else {}))
+        else:
+            data = tomllib.loads(text)
+    except DocumentError:
+        raise
     except json.JSONDecodeError as exc:
         raise DocumentError(f"invalid JSON at line {exc.lineno} ({exc.msg})") from exc
     except tomllib.TOMLDecodeError as exc:
         raise DocumentError(f"invalid TOML ({exc})") from exc
     except RecursionError as exc:  # the scan is the guard; this is the backstop
         raise DocumentError("nested too deeply to parse") from exc
+    except ValueError as exc:  # TOML integers past Python's 4300-digit conversion limit, and the like
+        if "digits" in str(exc):
+            raise DocumentError(f"a number with more than {sys.get_int_max_str_digits()} digits "
+                                f"(limit {MAX_DIGITS})") from exc
+        raise DocumentError(f"a number that cannot be read ({str(exc).splitlines()[0][:120]})") from exc
+    if finite_only:
+        check_numbers(data)
+    return data
 
 
 def parse_document(path: Path, max_bytes: int = MAX_BYTES, max_depth: int = MAX_DEPTH) -> Any:

@@ -131,3 +131,30 @@ def test_status_prints_the_url_without_its_password(pg_url: str, settings_env: P
     assert "postgres:***@" in _flat(doctor.output)  # inside a table cell, which rich may wrap
     for result in (upgrade, status, current, doctor):
         assert SECRET not in _flat(result.output)
+
+
+@pytest.mark.parametrize("password", ["p@ss", "p@ss@word", "pa:ss", "pa/ss", "a@b:c/d", "p%40ss%2Fx%3A",
+                                      "@q@", ":x:", "/y/", "s3cret-Pa55@db:5432/photo"])
+def test_passwords_with_url_delimiters_never_appear(password: str) -> None:
+    """Masking parses the URL: the password is everything between the user's ':' and the last '@'."""
+    for text in (f"postgresql+psycopg://ps:{password}@db:5432/photo",
+                 f"cannot connect to postgresql://ps:{password}@db/photo (timeout); retrying"):
+        masked = mask_password(text)
+        assert password not in masked and "ps:***@db" in masked, masked
+        assert masked.replace("ps:***@", f"ps:{password}@") == text  # nothing else changed
+
+
+def test_urls_without_a_password_are_left_alone() -> None:
+    for plain in ("https://github.com/@someone", "s3://bucket/a@b/c", "file:///tmp/x:y@z", "postgresql://ps@db/photo"):
+        assert mask_password(plain) == plain
+
+
+def test_an_unescaped_at_in_the_password_is_masked_on_the_cli(settings_env: Path,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    secret = "pa@ss:wo/rd"
+    _use_url(monkeypatch, f"postgresql+psycopg://ps_user:{secret}@127.0.0.1:{_closed_port()}/photoshape")
+    result = runner.invoke(app, ["status"])
+    flat = _flat(result.output)
+    assert result.exit_code != 0 and "ps_user:***@127.0.0.1" in flat, result.output
+    for fragment in ("pa@ss", "ss:wo", "wo/rd"):
+        assert fragment not in flat and fragment not in str(result.exception), fragment

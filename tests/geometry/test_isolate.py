@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from tests.geometry.makers import add, crash_process, hang, raise_value_error
+from tests.geometry.makers import add, allocate, crash_process, hang, raise_value_error
 
 from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError, WorkerTimeoutError
 
@@ -20,3 +20,11 @@ def test_results_exceptions_crash_and_timeout_in_one_worker() -> None:
         with pytest.raises(WorkerTimeoutError, match="timed out"):
             worker.call(hang, timeout_s=1.0)
         assert worker.call(add, 5, 5) == 10
+
+
+def test_the_memory_budget_stops_a_bomb_in_the_child_only() -> None:
+    with IsolatedWorker(timeout_s=60, memory_bytes=1024**3) as worker:
+        assert worker.call(allocate, 64 * 1024**2) == 8 * 1024**2
+        with pytest.raises(MemoryError):
+            worker.call(allocate, 3 * 1024**3)  # would pass without the budget (the test host has the memory)
+        assert worker.call(add, 1, 2) == 3

@@ -1,4 +1,4 @@
-"""Hostile input through `photoshape ingest`: 57 kinds, each one clear line and 0 tracebacks, and the batch goes on.
+"""Hostile input through `photoshape ingest`: 76 kinds, each one clear line and 0 tracebacks, and the batch goes on.
 
 Each case writes one tiny hostile input (sidecars nested 400 KB deep or 2 MB large, folders named like
 files, non-zip and zip-bomb catalogs, names with a newline, a right-to-left override, HTML or rich
@@ -6,7 +6,7 @@ markup, empty and truncated PNG/JPEG/HDR/EXR/GLB, symlinks out of the folder, ..
 input of the same collection, and runs the real CLI (`photoshape ingest <collection>`). Every case
 must: exit 0 (accepted) or 2 (rejected, never a crash), print no traceback and no control or bidi
 character, name the hostile file on a `rejected` line with the expected reason, and still ingest
-the good input after it. The count (57 kinds) is asserted below so it cannot shrink unnoticed.
+the good input after it. The count (76 kinds) is asserted below so it cannot shrink unnoticed.
 """
 
 from __future__ import annotations
@@ -138,7 +138,57 @@ def _bomb_member() -> tuple[dict[str, bytes], list[tuple[zipfile.ZipInfo, bytes]
     return members, []
 
 
+def _outside_file(root: Path, name: str) -> Path:
+    """A valid file of that kind beside the ingested folder, not inside it."""
+    target = root.parent / "outside" / name
+    target.parent.mkdir(parents=True, exist_ok=True)
+    if name.endswith(".hdr"):
+        write_hdr(target, sky(16, 8))
+    else:
+        target.write_bytes(PNG if name.endswith(".png") else b'{"substance": "wood"}')
+    return target
+
+
+def _outside_png(root: Path) -> Path:
+    return _outside_file(root, "other.png")
+
+
+def _outside_material(root: Path) -> Path:
+    folder = root.parent / "outside" / "wood_elsewhere"
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "albedo.png").write_bytes(PNG)
+    return folder
+
+
+def _material_link(name: str, target: Callable[[Path], Path]) -> Callable[[Path], Path]:
+    """Material folder `wood_a` whose `name` is a symbolic link to `target` (plus a real albedo otherwise)."""
+    def build(root: Path) -> Path:
+        folder = root / "wood_a"
+        folder.mkdir(parents=True, exist_ok=True)
+        if name != "albedo.png":
+            (folder / "albedo.png").write_bytes(PNG)
+        os.symlink(target(root), folder / name)
+        return root
+
+    return build
+
+
+def _envmap(values: np.ndarray) -> Callable[[Path], Path]:
+    def build(root: Path) -> Path:
+        write_hdr(root / "a.hdr", values)
+        return root
+
+    return build
+
+
+def _absurd_sky() -> np.ndarray:
+    values = sky(16, 8)
+    values[2, 3] = 1.7e38  # RGBE encodes it; its luminance overflows float32
+    return values
+
+
 PNG = _png_bytes(np.full((8, 8, 3), 200, np.uint8))
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
 HDR_TEXT = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 512 +X 1024\n" + b"\x02\x02\x04\x00" * 8
 CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
     # (id, collection, build(root) -> path given, expected reason fragment or None when accepted)
@@ -161,12 +211,32 @@ CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
     ("json-name-isolate", "materials", _sidecar(_json(name="oak\u2066x\u2069")), "U+2066"),
     ("json-attribution-list", "materials", _sidecar(_json(attribution=["a", "b"])), "attribution must be text"),
     ("json-source-too-long", "materials", _sidecar(_json(source="s" * 65)), "source is 65 characters"),
-    ("json-scale-nan", "materials", _sidecar('{"substance": "wood", "scale": NaN}'), "scale must be"),
+    ("json-scale-nan", "materials", _sidecar('{"substance": "wood", "scale": NaN}'), "non-finite number NaN"),
     ("json-params-string", "materials", _sidecar(_json(kind="analytic", params="x"), maps=False), "params must be"),
     ("json-html-attribution", "materials", _sidecar(_json(attribution="<script>alert(1)</script>\nline 2")), None),
     ("material-map-empty", "materials", _file("wood_a/albedo.png", b""), "albedo"),
     ("material-map-truncated", "materials", _file("wood_a/albedo.png", PNG[:40]), "albedo"),
     ("material-folder-newline", "materials", _file("wood_a\nb/albedo.png", PNG), "U+000A"),
+    ("json-scale-5000-digits", "materials", _sidecar('{"substance": "wood", "scale": ' + "1" * 5000 + "}"),
+     "a number with 5000 digits (limit 24)"),
+    ("toml-scale-5000-digits", "materials", _sidecar('substance = "wood"\nscale = ' + "1" * 5000, "material.toml"),
+     "more than 4300 digits"),
+    ("toml-scale-100-digits", "materials", _sidecar('substance = "wood"\nscale = ' + "1" * 100, "material.toml"),
+     "beyond the limit"),
+    ("json-scale-overflowing-float", "materials", _sidecar('{"substance": "wood", "scale": 1e400}'),
+     "non-finite number inf"),
+    ("json-params-absurd-float", "materials", _sidecar('{"substance": "wood", "params": {"x": 1e300}}'),
+     "beyond the limit"),
+    ("material-map-symlink-outside", "materials", _material_link("albedo.png", _outside_png),
+     "albedo.png: symbolic link to"),
+    ("material-map-symlink-passwd", "materials", _material_link("albedo.png", lambda _root: Path("/etc/passwd")),
+     "outside the ingested folder"),
+    ("material-extra-map-symlink-outside", "materials", _material_link("rough.png", _outside_png),
+     "rough.png: symbolic link to"),
+    ("material-sidecar-symlink-outside", "materials",
+     _material_link("material.json", lambda root: _outside_file(root, "m.json")), "material.json: symbolic link to"),
+    ("material-folder-symlink-outside", "materials", _symlink("wood_link", _outside_material),
+     "outside the ingested folder"),
     ("material-given-file", "materials", _given("x.png", _file("x.png", PNG)), "expected a material folder"),
     # --- shapes
     ("dir-named-obj-inside", "shapes", _folder("folder.obj"), "a folder, not a file"),
@@ -189,6 +259,12 @@ CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
     ("obj-bad-index", "shapes", _file("a.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999\n"), "a.obj"),
     ("obj-mtllib-outside", "shapes",
      _file("a.obj", "mtllib ../../../../etc/passwd\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"), None),
+    ("obj-coordinates-1e308", "shapes", _file("a.obj", "v 1e308 0 0\nv -1e308 0 0\nv 0 1e308 0\nf 1 2 3\n"),
+     "vertex coordinates beyond 1e+12"),
+    ("obj-part-name-rtl-override", "shapes", _file("a.obj", "usemtl oak\u202egnp.exe\n" + TRIANGLE + "f 1 2 3\n"),
+     "part name"),
+    ("obj-part-name-escape-sequence", "shapes", _file("a.obj", "usemtl x\x1b[31m\n" + TRIANGLE + "f 1 2 3\n"),
+     "U+001B"),
     ("glb-empty", "shapes", _file("a.glb", b""), "a.glb"),
     ("glb-truncated", "shapes", _file("a.glb", b"glTF\x02\x00\x00\x00\xff\xff"), "a.glb"),
     ("gltf-nested-json", "shapes", _file("a.gltf", "[" * NESTED + "]" * NESTED), "a.gltf"),
@@ -201,15 +277,24 @@ CASES: list[tuple[str, str, Callable[[Path], Path], str | None]] = [
     ("png-truncated", "exemplars", _file("a.png", PNG[: len(PNG) // 2]), "a.png"),
     ("png-is-text", "exemplars", _file("a.png", "hello"), "a.png"),
     ("png-decompression-bomb", "exemplars", _file("a.png", png_declaring(50_000, 50_000)), "a.png"),
+    ("png-strip-80000x2", "exemplars", _file("a.png", _png_bytes(np.zeros((2, 80000), np.uint8))),
+     "aspect ratio 40000:1"),
+    ("png-strip-2x30000", "exemplars", _file("a.png", _png_bytes(np.zeros((30000, 2), np.uint8))),
+     "aspect ratio 15000:1"),
+    ("photo-symlink-outside", "exemplars", _symlink("a.png", _outside_png), "outside the ingested folder"),
     ("photo-name-rtl-override", "exemplars", _file("a\u202egnp.jpg", PNG), "U+202E"),
     ("dir-named-jpg", "exemplars", _folder("a.jpg"), "a folder, not a file"),
     # --- envmaps
     ("hdr-truncated", "envmaps", _file("a.hdr", HDR_TEXT), "a.hdr"),
     ("hdr-empty", "envmaps", _file("a.hdr", b""), "a.hdr"),
     ("exr-garbage", "envmaps", _file("a.exr", b"v/1\x01" + b"\x00" * 64), "a.exr"),
+    ("hdr-radiance-1.7e38", "envmaps", _envmap(_absurd_sky()), "radiance up to 1.69e+38, beyond the limit"),
+    ("hdr-nan", "envmaps", _envmap(np.full((8, 16, 3), np.nan, np.float32)), "a.hdr"),
+    ("hdr-symlink-outside", "envmaps", _symlink("a.hdr", lambda root: _outside_file(root, "a.hdr")),
+     "outside the ingested folder"),
     ("dir-named-hdr", "envmaps", _folder("a.hdr"), "a folder, not a file"),
 ]
-KINDS = 57  # the docstring's count
+KINDS = 76  # the docstring's count
 
 
 @pytest.fixture(scope="module")

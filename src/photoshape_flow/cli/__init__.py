@@ -42,12 +42,40 @@ def _show_version(value: bool) -> None:
         raise typer.Exit()
 
 
+def _require_blob_backend() -> None:
+    """One line naming the package to install when the blob store's URL needs a missing fsspec backend.
+
+    Checked before any verb runs, so an ``s3://`` root without s3fs is that line (exit 1), not an
+    ImportError traceback from wherever the store is first opened. `doctor` reports it itself.
+    """
+    try:
+        from photoshape_flow.config import get_settings
+
+        root = get_settings().blob_root
+    except Exception:  # broken settings: the verb reports them in its own words
+        return
+    from photoshape_flow.store.refs import is_url
+
+    if not is_url(root):
+        return
+    from photoshape_flow.store.remote import missing_backend
+
+    reason = missing_backend(str(root))
+    if reason is not None:
+        from photoshape_flow.cli.common import fail
+
+        fail(reason)
+
+
 @app.callback()
 def _options(
+    ctx: typer.Context,
     version: bool = typer.Option(False, "--version", help="Print the version and exit.", is_eager=True,
                                  callback=_show_version),
 ) -> None:
     """Photorealistic, relightable materials for 3D shape collections (PhotoShape, SIGGRAPH Asia 2018)."""
+    if ctx.invoked_subcommand not in (None, "doctor") and not ctx.resilient_parsing:
+        _require_blob_backend()
 
 
 def _register_verbs() -> None:

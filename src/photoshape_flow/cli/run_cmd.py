@@ -112,6 +112,28 @@ def run(
             resolved, ctx, names=None if stage == "all" else [stage], wait=wait,
             on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")))
     print_reports(reports)
+    exit_if_inputs_rejected(reports)
+
+
+def exit_if_inputs_rejected(reports: Sequence[StageReport]) -> None:
+    """One line per input the ingest stage rejected, then exit 2 (as `photoshape ingest` does).
+
+    The run itself went on and is recorded as done: a poison file in the inbox costs its own line,
+    never the other items or the later stages; the exit code tells a script that something was refused.
+    """
+    from photoshape_flow.cli.common import shown
+    from photoshape_flow.cli.ingest_cmd import REJECTED_EXIT
+
+    lines = [line for r in reports if r.stage == "ingest"
+             for details in r.details.values() if isinstance(details, dict)
+             for line in details.get("rejected", [])]
+    if not lines:
+        return
+    for line in lines:
+        err_console.print(f"[red]rejected[/] {shown(line)}", highlight=False)
+    err_console.print(f"[red]{len(lines)} input{'s' if len(lines) != 1 else ''} rejected at ingest[/]: the "
+                      "run went on without them; the reasons are on the 'rejected' lines above", highlight=False)
+    raise typer.Exit(REJECTED_EXIT)
 
 
 def publish_pairs(resolved: Any, ctx: Any, pairs: Sequence[int]) -> StageReport:

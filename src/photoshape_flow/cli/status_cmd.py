@@ -17,11 +17,13 @@ def status() -> None:
     from photoshape_flow.db import claims
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.progress import assumed_profile, table_counts
+    from photoshape_flow.pipeline.runs import mark_dead_runs
     from photoshape_flow.stages import stage_progress
 
     settings = get_settings()
     require_database()
     with session_scope() as session:
+        mark_dead_runs(session)  # a killed run is counted as died, never as running
         stages = stage_progress(session)
         tables = table_counts(session)
         assumed = assumed_profile(session)

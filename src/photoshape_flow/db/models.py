@@ -450,6 +450,10 @@ class PipelineRun(Base):
     error: Mapped[str | None] = mapped_column(sa.Text)
     started_at: Mapped[dt.datetime] = mapped_column(default=utcnow, server_default=sa.func.now())
     finished_at: Mapped[dt.datetime | None]
+    holder_host: Mapped[str | None] = mapped_column(sa.String(128), comment="host name of the running process")
+    holder_pid: Mapped[int | None] = mapped_column(comment="its process id")
+    holder_started: Mapped[str | None] = mapped_column(
+        sa.String(32), comment="its start time (clock ticks since boot): a reused pid differs")
 
 
 ALL_TABLES: tuple[type[Base], ...] = (

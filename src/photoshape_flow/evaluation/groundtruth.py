@@ -17,7 +17,6 @@ not this format at all is an error (`GroundTruthError`). Names are checked again
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -26,7 +25,12 @@ from typing import Any, Literal
 
 import numpy as np
 
+from photoshape_flow.export.text import one_line
+from photoshape_flow.sidecar import DocumentError, parse_text
+
 FORMAT = "photoshape-groundtruth"
+MAX_BYTES = 256 * 1024 * 1024  # a million entries are a few hundred megabytes; more is no ground truth
+MAX_DEPTH = 16  # an entry nests five levels deep (exemplars, entry, parts, part, value)
 VERSION = 2
 MASK_KINDS: tuple[str, ...] = ("part", "material")
 
@@ -318,7 +322,7 @@ def parse_groundtruth_data(data: Any, root: Path, *, path: Path | None = None, s
         entries.append(entry)
     extra = {k: v for k, v in data.items() if k not in ("format", "version", "exemplars")}
     return GroundTruthFile(path=Path(where), sha256=sha256, version=VERSION, entries=tuple(entries),
-                           problems=tuple(problems), extra=extra)
+                           problems=tuple(one_line(problem) for problem in problems), extra=extra)
 
 
 def _json_lines(text: str, where: Path) -> tuple[dict[str, Any], list[str], list[str]]:
@@ -329,9 +333,9 @@ def _json_lines(text: str, where: Path) -> tuple[dict[str, Any], list[str], list
     if not lines:
         raise GroundTruthError(f"{where}: empty")
     try:
-        header = json.loads(lines[0][1])
-    except json.JSONDecodeError as exc:
-        raise GroundTruthError(f"{where}: line {lines[0][0]}, the header, is not JSON ({exc.msg})") from exc
+        header = parse_text(lines[0][1], "json", MAX_DEPTH, finite_only=False)
+    except DocumentError as exc:
+        raise GroundTruthError(f"{where}: line {lines[0][0]}, the header, is not JSON ({exc})") from exc
     if not isinstance(header, Mapping):
         raise GroundTruthError(f"{where}: line {lines[0][0]} must be the header object (format, version)")
     entries: list[Any] = []
@@ -339,9 +343,9 @@ def _json_lines(text: str, where: Path) -> tuple[dict[str, Any], list[str], list
     problems: list[str] = []
     for n, line in lines[1:]:
         try:
-            entries.append(json.loads(line))
-        except json.JSONDecodeError as exc:
-            problems.append(f"line {n}: not JSON ({exc.msg}); skipped")
+            entries.append(parse_text(line, "json", MAX_DEPTH, finite_only=False))
+        except DocumentError as exc:
+            problems.append(f"line {n}: not JSON ({exc}); skipped")
             continue
         labels.append(f"line {n}")
     return {**header, "exemplars": entries}, labels, problems
@@ -352,16 +356,20 @@ def read_groundtruth_file(path: Path | str) -> GroundTruthFile:
     the evaluation it feeds."""
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise GroundTruthError(f"{path}: {size} bytes (limit {MAX_BYTES})")
         raw = path.read_bytes()
     except OSError as exc:
         raise GroundTruthError(f"{path}: cannot read ({exc.strerror or exc})") from exc
     sha256 = hashlib.sha256(raw).hexdigest()
     try:
+        text = raw.decode("utf-8")
         if path.suffix.lower() == ".jsonl":
-            data, labels, problems = _json_lines(raw.decode("utf-8"), path)
+            data, labels, problems = _json_lines(text, path)
             return parse_groundtruth_data(data, path.parent, path=path, sha256=sha256, labels=labels,
                                           problems=problems)
-        data = json.loads(raw)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        data = parse_text(text, "json", MAX_DEPTH, finite_only=False)  # bounded depth and digits
+    except (DocumentError, UnicodeDecodeError) as exc:
         raise GroundTruthError(f"{path}: not JSON ({exc})") from exc
     return parse_groundtruth_data(data, path.parent, path=path, sha256=sha256)

@@ -11,6 +11,7 @@ import posixpath
 import re
 import stat
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -123,7 +124,7 @@ class SafeZip:
                             f"archive member {info.filename!r} inflates beyond its declared size"
                         )
                     chunks.append(block)
-        except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, NotImplementedError) as exc:
             raise BadShapeError(f"archive member {info.filename!r} is corrupt ({exc})") from exc
         return b"".join(chunks)
 

@@ -6,6 +6,11 @@ fork, so it is safe in threaded hosts such as Prefect workers), sends it a funct
 name plus picklable arguments, and waits with a timeout. A dead child raises `WorkerCrashedError`,
 an overrun kills it and raises `WorkerTimeoutError`; either way the next call starts a fresh child.
 Exceptions raised by the function come back as themselves (BadShapeError stays a rejection).
+
+`memory_bytes` is the per-item memory budget: the child's data segment (heap and anonymous maps,
+RLIMIT_DATA: what decoders and numpy allocate, not the shared libraries it maps) is capped, so a
+bomb that slips past every size check gets a MemoryError (or dies) in the child, never swaps the
+machine; either way it costs one item.
 """
 
 from __future__ import annotations
@@ -27,7 +32,13 @@ class WorkerTimeoutError(RuntimeError):
     """The child process ran past its time limit and was killed."""
 
 
-def _child_main(conn: Any) -> None:
+def _child_main(conn: Any, memory_bytes: int | None = None) -> None:
+    if memory_bytes is not None:
+        import resource
+
+        _soft, hard = resource.getrlimit(resource.RLIMIT_DATA)
+        cap = memory_bytes if hard == resource.RLIM_INFINITY else min(memory_bytes, hard)
+        resource.setrlimit(resource.RLIMIT_DATA, (cap, hard))
     while True:
         try:
             message = conn.recv()
@@ -61,15 +72,17 @@ def _describe_exit(code: int | None) -> str:
 class IsolatedWorker:
     """One reusable child process; use as a context manager."""
 
-    def __init__(self, timeout_s: float = 600.0):
+    def __init__(self, timeout_s: float = 600.0, memory_bytes: int | None = None):
         self.timeout_s = timeout_s
+        self.memory_bytes = memory_bytes
         self._ctx = mp.get_context("spawn")
         self._proc: Any = None
         self._conn: Any = None
 
     def _start(self) -> None:
         parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_child_main, args=(child,), daemon=True, name="photoshape-isolated")
+        proc = self._ctx.Process(target=_child_main, args=(child, self.memory_bytes), daemon=True,
+                                 name="photoshape-isolated")
         proc.start()
         child.close()
         self._proc, self._conn = proc, parent

@@ -25,6 +25,8 @@ from photoshape_flow.geometry.raw import BadShapeError, RawPart, RawShape, Shape
 def resolve_inside(base: Path, relative: str, root: Path) -> Path | None:
     """`relative` resolved against `base`, case-insensitively if needed; None if missing or outside `root`."""
     relative = relative.replace("\\", "/").strip()
+    if "\0" in relative:  # no file name holds a NUL; os calls would raise ValueError on it
+        return None
     if not relative or relative.startswith("/") or re.match(r"^[A-Za-z]:", relative):
         # absolute paths from the author's machine: try the file name next to the model
         relative = relative.rsplit("/", 1)[-1]

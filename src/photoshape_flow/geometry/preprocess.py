@@ -15,11 +15,13 @@ from typing import Any
 
 import numpy as np
 
+from photoshape_flow.export.text import hidden_character, one_line
 from photoshape_flow.geometry.mesh import PartMesh, ShapeMesh, triangle_areas
 from photoshape_flow.geometry.normals import corner_normals, split_vertices
 from photoshape_flow.geometry.raw import BadShapeError, RawPart, RawShape
 
 PREPROCESS_VERSION = 1  # bump when the output of `preprocess` changes for the same input
+MAX_COORDINATE = 1e12  # |x|, |y|, |z| of any vertex: a city in micrometres fits; 1e308 would overflow extents
 
 
 @dataclass(frozen=True)
@@ -192,12 +194,18 @@ def preprocess(raw: RawShape, options: PreprocessOptions | None = None) -> Shape
         rotation = np.asarray(options.rotation, np.float64).reshape(3, 3)
     parts: list[RawPart] = []
     for part in raw.parts:
+        hidden = hidden_character(part.name)
+        if hidden is not None:  # part names become keys and labels: checked like every other name
+            raise BadShapeError(f"part name {one_line(part.name)!r} contains {hidden}")
         vertices = np.asarray(part.vertices, np.float64)
         if rotation is not None:
             vertices = vertices @ rotation.T
         used = np.unique(part.faces) if len(part.faces) else np.zeros(0, np.int64)
         if not np.isfinite(vertices[used]).all():
             raise BadShapeError(f"part {part.name!r}: non-finite vertex coordinates")
+        if len(used) and float(np.abs(vertices[used]).max()) > MAX_COORDINATE:
+            raise BadShapeError(f"part {part.name!r}: vertex coordinates beyond {MAX_COORDINATE:.0e} "
+                                "(absurd scale; their extent would overflow)")
         parts.append(RawPart(part.name, vertices, part.faces, part.uvs, part.material, part.meta))
     allv = np.concatenate([p.vertices[np.unique(p.faces)] for p in parts if len(p.faces)])
     lo, hi = allv.min(axis=0), allv.max(axis=0)

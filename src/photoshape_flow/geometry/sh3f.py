@@ -9,6 +9,7 @@ only those are extracted, through `SafeZip`.
 
 from __future__ import annotations
 
+import math
 import posixpath
 import re
 from dataclasses import dataclass, field
@@ -146,6 +147,9 @@ def read_catalog(archive: SafeZip) -> Catalog:
                 rotation = values if len(values) == 9 else None
             except ValueError:
                 rotation = None
+            if rotation is not None and not all(math.isfinite(v) and abs(v) <= 1.001 for v in rotation):
+                invalid.append((label, "modelRotation is no rotation matrix (non-finite or beyond ±1 values)"))
+                continue
         tags = get("tags") or ""
         catalog_category = get("category") or ""
         entries.append(

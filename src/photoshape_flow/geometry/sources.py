@@ -31,7 +31,7 @@ from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip
 from photoshape_flow.geometry.obj import referenced_files, resolve_inside
 from photoshape_flow.geometry.raw import BadShapeError
 from photoshape_flow.geometry.sh3f import read_catalog
-from photoshape_flow.inputs import walk_inputs
+from photoshape_flow.inputs import Fingerprints, fingerprint, walk_inputs
 from photoshape_flow.sidecar import parse_document
 
 MODEL_SUFFIXES = {".obj": "obj", ".gltf": "gltf", ".glb": "glb"}
@@ -133,11 +133,17 @@ def _catalog_items(
         with SafeZip(path, limits) as archive:
             catalog = read_catalog(archive)
             sizes = {name.lower(): archive.find(name).file_size for name in archive.names()}  # type: ignore[union-attr]
-    except (BadShapeError, OSError) as exc:
+    except Exception as exc:  # BadShapeError, OSError, and whatever a corrupt zip raises (one catalog, one line)
         # a catalog-level row (source_id: the catalog's stem), so the reject is queryable like others
-        yield RejectedInput(str(path), str(exc), source or "sweethome3d", path.stem, path.stem)
+        reason = (str(exc) if isinstance(exc, BadShapeError | OSError)
+                  else f"unreadable catalog ({type(exc).__name__}: {exc})")
+        yield RejectedInput(str(path), reason.splitlines()[0] if reason.strip() else type(exc).__name__,
+                            source or "sweethome3d", path.stem, path.stem)
         return
     src = source or "sweethome3d"
+    if not catalog.entries and not catalog.invalid:
+        yield RejectedInput(str(path), "no furniture in the catalog (no model#N entries)", src, path.stem, path.stem)
+        return
     for label, reason in catalog.invalid:
         yield RejectedInput(label, reason, src, f"{path.stem}/{label.split(':', 1)[-1]}")
     for entry in catalog.entries:
@@ -287,6 +293,7 @@ class Materialized:
     root: Path
     sha256: str
     files: list[str]
+    fingerprints: Fingerprints = field(default_factory=dict)  # plain files: taken before hashing
 
 
 @contextmanager
@@ -303,8 +310,9 @@ def materialize(item: ShapeItem, limits: ArchiveLimits | None = None) -> Iterato
         else:
             deps = []
         paths = [model, *[d for d in deps if d != model]]
+        before = fingerprint(paths)
         sha = _file_hash(paths, model.parent)
-        yield Materialized(model=model, root=root, sha256=sha, files=[str(p) for p in paths])
+        yield Materialized(model=model, root=root, sha256=sha, files=[str(p) for p in paths], fingerprints=before)
         return
     from photoshape_flow.geometry.sh3f import model_files
 

@@ -17,7 +17,9 @@ from typing import Any
 import numpy as np
 
 from photoshape_flow.imaging.io import BadImageError
-from photoshape_flow.imaging.squares import crop_square
+from photoshape_flow.imaging.squares import crop_square, crop_square_resized
+
+MAX_CROP_PIXELS = 64_000_000  # the native square is built only up to this; larger ones are resized as cut
 
 
 @dataclass(frozen=True)
@@ -86,8 +88,14 @@ def foreground_mask(rgb: np.ndarray, options: ExemplarOptions | None = None) -> 
     return mask, threshold
 
 
-def prepare_exemplar(rgb: np.ndarray, options: ExemplarOptions | None = None) -> PreparedExemplar:
-    """Mask, crop and resize a decoded photo; BadImageError when there is no usable foreground."""
+def prepare_exemplar(rgb: np.ndarray, options: ExemplarOptions | None = None,
+                     max_crop_pixels: int = MAX_CROP_PIXELS) -> PreparedExemplar:
+    """Mask, crop and resize a decoded photo; BadImageError when there is no usable foreground.
+
+    The square around the foreground is cut at native resolution (then resized) only while it has
+    at most `max_crop_pixels`; a larger one is cut and resized in one step (`crop_square_resized`),
+    so the memory a crop takes is bounded by the photo and the stored size, never by side^2.
+    """
     import cv2
 
     options = options or ExemplarOptions()
@@ -117,10 +125,15 @@ def prepare_exemplar(rgb: np.ndarray, options: ExemplarOptions | None = None) ->
     side = int(round(side * (1.0 + 2.0 * options.margin)))
     x0 = int(np.floor((bx0 + bx1 - side) / 2.0))
     y0 = int(np.floor((by0 + by1 - side) / 2.0))
-    crop = crop_square(rgb, x0, y0, side, fill=255)
-    crop_mask = crop_square(mask.astype(np.uint8) * 255, x0, y0, side, fill=0)
     out = min(options.size, side)
-    if out != side:
+    if side * side > max_crop_pixels:
+        crop = crop_square_resized(rgb, x0, y0, side, out, fill=255)
+        crop_mask = crop_square_resized(mask.astype(np.uint8) * 255, x0, y0, side, out, fill=0)
+        crop_mask = np.where(crop_mask >= 128, 255, 0).astype(np.uint8)
+    else:
+        crop = crop_square(rgb, x0, y0, side, fill=255)
+        crop_mask = crop_square(mask.astype(np.uint8) * 255, x0, y0, side, fill=0)
+    if crop.shape[0] != out:
         crop = cv2.resize(crop, (out, out), interpolation=cv2.INTER_AREA)
         crop_mask = cv2.resize(crop_mask, (out, out), interpolation=cv2.INTER_AREA)
         crop_mask = np.where(crop_mask >= 128, 255, 0).astype(np.uint8)

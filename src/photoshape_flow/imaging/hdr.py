@@ -36,6 +36,9 @@ class EnvmapLimits:
     # and renders clamp at 0; anything deeper is a wrongly encoded map
     negative_tolerance: float = 0.01
     negative_floor: float = 1e-6  # absolute: a map whose 99th percentile is black (a lone sun) keeps it
+    # the brightest real suns in HDRIs reach about 1e5-1e6; RGBE can encode 1.7e38, whose luminance
+    # (a weighted sum) overflows float32 to infinity: anything past this is no photograph of a sky
+    max_radiance: float = 1e9
 
 
 @dataclass
@@ -147,6 +150,10 @@ def validate_envmap(path: Path, limits: EnvmapLimits | None = None) -> EnvmapInf
         raise BadEnvmapError(f"decoded size {array.shape[1]}x{array.shape[0]} differs from the header")
     if not np.isfinite(array).all():
         raise BadEnvmapError(f"{int((~np.isfinite(array)).sum())} non-finite (NaN/inf) values")
+    high = float(array.max())
+    if high > limits.max_radiance:
+        raise BadEnvmapError(f"radiance up to {high:.3g}, beyond the limit of {limits.max_radiance:.0e} "
+                             "(absurd values; a sun is about 1e5)")
     low = float(array.min())
     luminance = array @ np.array([0.2126, 0.7152, 0.0722], np.float32)
     peak = float(luminance.max())

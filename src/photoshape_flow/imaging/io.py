@@ -32,6 +32,20 @@ def _check_bytes(path: Path, max_bytes: int) -> None:
         raise BadImageError(f"file is {size} bytes (limit {max_bytes})")
 
 
+def aspect_refusal(width: int, height: int, max_aspect: float | None) -> str | None:
+    """Why a `width` x `height` canvas is too elongated (None when it is not, or no limit is set).
+
+    A 240-byte 80000x2 PNG has few pixels, but anything squaring its long side (an exemplar's
+    crop) would need 80000^2; such strips are no photo of an object, so they are refused unread.
+    """
+    if max_aspect is None:
+        return None
+    ratio = max(width, height) / max(min(width, height), 1)
+    if ratio <= max_aspect:
+        return None
+    return f"{width}x{height} pixels: aspect ratio {ratio:.0f}:1 exceeds the limit of {max_aspect:g}:1"
+
+
 def read_image(
     path: str | Path,
     *,
@@ -40,12 +54,14 @@ def read_image(
     max_bytes: int = DEFAULT_MAX_BYTES,
     mode: str = "RGB",
     background: tuple[int, int, int] = (255, 255, 255),
+    max_aspect: float | None = None,
 ) -> tuple[np.ndarray, dict[str, object]]:
     """Decode an image as RGB uint8 (alpha composited over `background`) or keep 8/16-bit data.
 
     `mode`: "RGB" -> (H, W, 3) uint8 with EXIF orientation applied; "raw" -> the decoded array in
     its own depth (uint8/uint16, 1 or 3 channels, alpha dropped). Returns (array, info) where info
-    holds format, native size and whether the source had alpha.
+    holds format, native size and whether the source had alpha. `max_aspect`: the longest side
+    may be at most this many times the shortest (checked from the header, before decoding).
     """
     from PIL import Image, ImageOps, UnidentifiedImageError
 
@@ -70,6 +86,9 @@ def read_image(
             raise BadImageError(f"empty image ({width}x{height})")
         if width * height > max_pixels:
             raise BadImageError(f"{width}x{height} pixels exceeds the limit of {max_pixels} (decompression bomb?)")
+        reason = aspect_refusal(width, height, max_aspect)
+        if reason is not None:
+            raise BadImageError(reason)
         try:
             image.load()
         except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:

@@ -18,6 +18,32 @@ def square_box(mask: np.ndarray) -> tuple[int, int, int] | None:
     return x0 - (side - (x1 - x0)) // 2, y0 - (side - (y1 - y0)) // 2, side
 
 
+def crop_square_resized(image: np.ndarray, x0: int, y0: int, side: int, out: int,
+                        fill: float | int = 0) -> np.ndarray:
+    """`crop_square` resized to `out` x `out`, never allocating the `side` x `side` square.
+
+    Only the part of the window inside the image is resized (by the same factor) and pasted onto an
+    `out` x `out` canvas of `fill`, so memory follows the image and `out`, whatever `side` is: a strip
+    whose foreground is 80000 pixels wide costs 80000 x 2 pixels, not 80000^2. INTER_AREA.
+    """
+    import cv2
+
+    image = np.asarray(image)
+    h, w = image.shape[:2]
+    canvas = np.full((out, out, *image.shape[2:]), fill, dtype=image.dtype)
+    sx0, sy0 = max(x0, 0), max(y0, 0)
+    sx1, sy1 = min(x0 + side, w), min(y0 + side, h)
+    if sx1 <= sx0 or sy1 <= sy0:
+        return canvas
+    scale = out / side
+    cx0, cy0 = min(int(round((sx0 - x0) * scale)), out - 1), min(int(round((sy0 - y0) * scale)), out - 1)
+    cw = max(1, min(int(round((sx1 - sx0) * scale)), out - cx0))
+    ch = max(1, min(int(round((sy1 - sy0) * scale)), out - cy0))
+    region = cv2.resize(np.ascontiguousarray(image[sy0:sy1, sx0:sx1]), (cw, ch), interpolation=cv2.INTER_AREA)
+    canvas[cy0 : cy0 + ch, cx0 : cx0 + cw] = region.reshape(ch, cw, *image.shape[2:])
+    return canvas
+
+
 def crop_square(image: np.ndarray, x0: int, y0: int, side: int, fill: float | int = 0) -> np.ndarray:
     """The `side` x `side` window at (x0, y0) of an (H, W[, C]) array, `fill` where it leaves the image."""
     image = np.asarray(image)

@@ -22,6 +22,7 @@ import numpy as np
 
 from photoshape_flow.export.text import hidden_character
 from photoshape_flow.imaging.io import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, BadImageError, read_map
+from photoshape_flow.inputs import link_refusal
 from photoshape_flow.sidecar import DocumentError, parse_document
 from photoshape_flow.vocab import SUBSTANCES
 
@@ -99,6 +100,9 @@ def read_sidecar(folder: Path) -> tuple[dict[str, Any] | None, Path | None]:
     """
     for name in SIDECARS:
         path = folder / name
+        link = link_refusal(path, folder)
+        if link is not None:
+            raise BadMaterialError(f"{name}: {link}")
         if not path.is_file():
             continue
         try:
@@ -262,6 +266,12 @@ def scan_material(folder: Path, *, substance: str | None = None, source: str | N
     for channel, filename in explicit.items():
         if channel not in (*CHANNELS, "gloss", "arm"):
             raise BadMaterialError(f"maps: unknown channel {channel!r}")
+        hidden = hidden_character(str(filename))
+        if hidden is not None:  # a NUL would reach os calls as a ValueError; a newline would split the reason
+            raise BadMaterialError(f"maps.{channel}: file name contains {hidden}")
+        link = link_refusal(folder / str(filename), folder)
+        if link is not None:
+            raise BadMaterialError(f"maps.{channel}: {link}")
         target = (folder / str(filename)).resolve()
         if not target.is_relative_to(folder.resolve()) or not target.is_file():
             raise BadMaterialError(f"maps.{channel}: file {filename!r} not found in the folder")
@@ -270,7 +280,12 @@ def scan_material(folder: Path, *, substance: str | None = None, source: str | N
     candidates: dict[str, list[tuple[Path, str | None]]] = {}
     taken = set(files.values())
     for entry in sorted(folder.iterdir()):
-        if not entry.is_file() or entry.suffix.lower() not in IMAGE_SUFFIXES or entry.resolve() in taken:
+        if entry.suffix.lower() not in IMAGE_SUFFIXES:
+            continue
+        link = link_refusal(entry, folder)
+        if link is not None:
+            raise BadMaterialError(f"{entry.name}: {link}")
+        if not entry.is_file() or entry.resolve() in taken:
             continue
         found = classify_map(entry.name)
         if found is None:

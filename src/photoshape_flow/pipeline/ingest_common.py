@@ -15,7 +15,7 @@ import logging
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
@@ -31,6 +31,7 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 logger = logging.getLogger(__name__)
+T = TypeVar("T")
 
 # progress(label, done, total) after each item: the one progress interface (progress_sink.py), whose
 # task is here the item just handled (the ingest stage re-labels it with its collection)
@@ -144,7 +145,9 @@ class IngestLimits:
     max_image_pixels: int = 64_000_000
     max_image_bytes: int = 256 * 1024 * 1024
     max_texture_pixels: int = 64 * 1024 * 1024
+    max_exemplar_aspect: float = 20.0  # long side / short side of a product photo; strips are refused unread
     timeout_s: float = 600.0  # per shape / envmap in the isolated worker
+    memory_bytes: int = 6 * 1024**3  # per shape / envmap: the isolated worker's data segment (a bomb's ceiling)
     archive: ArchiveLimits = field(default_factory=ArchiveLimits)
 
     @classmethod
@@ -198,6 +201,39 @@ def one_line(exc: BaseException) -> str:
     """An exception as one short line (first line of its message, type name if empty)."""
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     return text[:500]
+
+
+def rejection_reason(exc: BaseException) -> str:
+    """Why an item's reader gave up, as one line: the exception's own words, named by kind.
+
+    Memory and recursion errors get a reason of their own, since their messages say nothing
+    ("" and "maximum recursion depth exceeded") a user could act on.
+    """
+    if isinstance(exc, MemoryError):
+        return "out of memory while reading it (over the per-item memory budget)"
+    if isinstance(exc, RecursionError):
+        return "nested too deeply to read"
+    if isinstance(exc, OSError):
+        return f"unreadable ({exc.strerror or one_line(exc)})"
+    return f"{type(exc).__name__}: {one_line(exc)}"
+
+
+def guard_item(summary: IngestSummary, label: str, call: Callable[[], T]) -> T | None:
+    """Run one item's ingest; any exception becomes one `rejected` line and the batch goes on.
+
+    The one guard every collection runs each item behind: the readers reject what they foresee
+    with their own reasons (and rows), and this catches what they did not (a ValueError from a
+    number parser, a RecursionError, a MemoryError, a decoder's own exception), so one poison
+    file never ends a batch or a scheduled run. Nothing is written for such an item: its row is
+    upserted last, so an exception before that leaves no partial row. The traceback goes to the
+    debug log only; the console shows one line. Returns what `call` returned (None when rejected here).
+    """
+    try:
+        return call()
+    except Exception as exc:  # MemoryError and RecursionError are Exceptions too
+        logger.debug("%s: rejected after an unforeseen error", text_line(label), exc_info=True)
+        summary.reject(label, rejection_reason(exc))
+        return None
 
 
 def adopt_renamed_row(

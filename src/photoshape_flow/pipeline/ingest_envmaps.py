@@ -24,14 +24,16 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.geometry.isolate import IsolatedWorker, WorkerCrashedError, WorkerTimeoutError
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.hdr import HDR_SUFFIXES, BadEnvmapError, EnvmapLimits, validate_envmap
-from photoshape_flow.inputs import walk_inputs
+from photoshape_flow.inputs import ChangedWhileReadingError, check_unchanged, fingerprint, walk_inputs
 from photoshape_flow.pipeline.ingest_common import (
     FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
+    guard_item,
     hash_fraction,
     one_line,
+    rejection_reason,
     resolve_settings,
     store_for,
 )
@@ -105,6 +107,7 @@ def _ingest_file(
     row: dict[str, Any] = {"name": name, "split": wanted_split, "source_path": str(path.resolve()),
                            "license": license, "attribution": attribution, "source_url": source_url}
     try:
+        before = fingerprint([path])
         sha = sha256_file(path)
     except OSError as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, f"unreadable ({exc.strerror or exc})", existing)
@@ -128,11 +131,22 @@ def _ingest_file(
     except (WorkerCrashedError, WorkerTimeoutError) as exc:
         _record_failure(url, summary, label, row, STATUS_FAILED, f"decoder {one_line(exc)}", existing)
         return
+    except MemoryError as exc:
+        _record_failure(url, summary, label, row, STATUS_REJECTED, rejection_reason(exc), existing)
+        return
     except Exception as exc:
-        logger.exception("%s: unexpected error", label)
+        logger.debug("%s: unexpected error", label, exc_info=True)
         _record_failure(url, summary, label, row, STATUS_FAILED, f"{type(exc).__name__}: {one_line(exc)}", existing)
         return
     ref = store.put_file(path, ext=path.suffix.lower().lstrip("."))
+    try:  # what was validated and stored is what was hashed: the blob's name is its own sha256
+        check_unchanged(before)
+        if not ref.startswith(sha):
+            raise ChangedWhileReadingError(f"{path.name} changed while being read; ingest it again once it is "
+                                           "completely written")
+    except ChangedWhileReadingError as exc:
+        _record_failure(url, summary, label, row, STATUS_REJECTED, one_line(exc), existing)
+        return
     values = {
         **row,
         "blob": ref,
@@ -174,7 +188,7 @@ def ingest_envmaps(
     summary = IngestSummary("envmaps")
     entries = list(walk_inputs(paths, HDR_SUFFIXES))
     seen: dict[str, Path] = {}
-    worker = IsolatedWorker(limits.timeout_s) if isolate else None
+    worker = IsolatedWorker(limits.timeout_s, limits.memory_bytes) if isolate else None
     try:
         for done, found in enumerate(entries, start=1):
             path = found.path
@@ -184,8 +198,9 @@ def ingest_envmaps(
                 summary.reject(str(path), f"envmap name {path.stem!r} already used by {seen[path.stem]} in this batch")
             else:
                 seen[path.stem] = path
-                _ingest_file(path, url=url, store=store, summary=summary, split=split, license=license,
-                             attribution=attribution, source_url=source_url, env_limits=env_limits, worker=worker)
+                guard_item(summary, str(path), lambda path=path: _ingest_file(
+                    path, url=url, store=store, summary=summary, split=split, license=license,
+                    attribution=attribution, source_url=source_url, env_limits=env_limits, worker=worker))
             if progress is not None:
                 progress(str(path), done, len(entries))
     finally:

@@ -31,13 +31,14 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.dedupe import DEFAULT_RADIUS, DESCRIPTOR, assign_duplicates, dense_hog
 from photoshape_flow.imaging.exemplar import ExemplarOptions, prepare_exemplar
 from photoshape_flow.imaging.io import BadImageError, read_image
-from photoshape_flow.inputs import Found, walk_inputs
+from photoshape_flow.inputs import ChangedWhileReadingError, Found, check_unchanged, fingerprint, walk_inputs
 from photoshape_flow.pipeline.ingest_common import (
     FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
     adopt_renamed_row,
+    guard_item,
     one_line,
     resolve_settings,
     store_for,
@@ -187,8 +188,9 @@ def ingest_exemplars(
                                "(use --source to tell them apart)")
             else:
                 seen[source_id] = path
-                item = _prepare(found, src, category, license, attribution, source_url, options, limits,
-                                params_payload, url, store, summary, batch_ids)
+                item = guard_item(summary, label, lambda found=found: _prepare(
+                    found, src, category, license, attribution, source_url, options, limits, params_payload,
+                    url, store, summary, batch_ids))
                 if isinstance(item, _Ready):
                     ready.append(item)
             if progress is not None:
@@ -259,6 +261,7 @@ def _prepare(
         "source_url": source_url,
     }
     try:
+        before = fingerprint([path])
         sha = sha256_file(path)
     except OSError as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, f"unreadable ({exc.strerror or exc})", existing)
@@ -274,16 +277,18 @@ def _prepare(
         summary.present.append(existing["id"])
         return None
     try:
-        rgb, info = read_image(path, max_pixels=limits.max_image_pixels, max_bytes=limits.max_image_bytes)
+        rgb, info = read_image(path, max_pixels=limits.max_image_pixels, max_bytes=limits.max_image_bytes,
+                               max_aspect=limits.max_exemplar_aspect)
+        check_unchanged(before)  # the pixels decoded are the bytes hashed
         prepared = prepare_exemplar(rgb, options)
-    except BadImageError as exc:
+    except (BadImageError, ChangedWhileReadingError) as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, one_line(exc), existing)
         return None
     except MemoryError:
         _record_failure(url, summary, label, row, STATUS_REJECTED, "out of memory while decoding", existing)
         return None
     except Exception as exc:  # decoder bug or unforeseen input: record, keep going
-        logger.exception("%s: unexpected error", label)
+        logger.debug("%s: unexpected error", label, exc_info=True)
         _record_failure(url, summary, label, row, STATUS_FAILED, f"{type(exc).__name__}: {one_line(exc)}", existing)
         return None
     feature = dense_hog(prepared.image)

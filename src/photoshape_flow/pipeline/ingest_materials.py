@@ -36,12 +36,14 @@ from photoshape_flow.imaging.svbrdf import (
     load_maps,
     scan_material,
 )
+from photoshape_flow.inputs import ChangedWhileReadingError, check_unchanged, fingerprint, link_refusal
 from photoshape_flow.pipeline.ingest_common import (
     FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
     files_hash,
+    guard_item,
     one_line,
     resolve_settings,
     store_for,
@@ -71,15 +73,20 @@ def discover_material_folders(paths: Iterable[str | Path]) -> list[tuple[Path, s
             out.append((path, None))
             continue
         found: list[Path] = []
+        refused: list[tuple[Path, str | None]] = []
         frontier = [path]
         for _ in range(MAX_DEPTH):
             children = sorted(c for d in frontier for c in d.iterdir() if c.is_dir() and not c.name.startswith("."))
             frontier = []
             for child in children:
-                (found if is_material_folder(child) else frontier).append(child)
-        if not found:
+                link = link_refusal(child, path)
+                if link is not None:
+                    refused.append((child, link))
+                else:
+                    (found if is_material_folder(child) else frontier).append(child)
+        if not found and not refused:
             out.append((path, "no material folders found (no recognised maps or material.json)"))
-        out.extend((f, None) for f in sorted(found))
+        out.extend(sorted([*((f, None) for f in found), *refused], key=lambda item: item[0]))
     return out
 
 
@@ -134,8 +141,9 @@ def ingest_materials(
         if reason is not None:
             summary.reject(label, reason)
         else:
-            _ingest_folder(folder, url=url, store=store, summary=summary, substance=substance, source=source,
-                           license=license, attribution=attribution, limits=limits, seen=seen)
+            guard_item(summary, label, lambda folder=folder: _ingest_folder(
+                folder, url=url, store=store, summary=summary, substance=substance, source=source,
+                license=license, attribution=attribution, limits=limits, seen=seen))
         if progress is not None:
             progress(label, done, len(folders))
     if events is not None:
@@ -188,6 +196,7 @@ def _ingest_folder(
         "source_path": str(folder.resolve()),
     }
     try:
+        before = fingerprint(scan.hashed_files())
         sha = files_hash(scan.hashed_files(), base=folder)
     except OSError as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, f"unreadable ({exc.strerror or exc})", existing)
@@ -205,11 +214,12 @@ def _ingest_folder(
         known_warnings = len(scan.warnings)
         try:
             arrays, meta = load_maps(scan, max_pixels=limits.max_image_pixels, max_bytes=limits.max_image_bytes)
-        except BadMaterialError as exc:
+            check_unchanged(before)  # the maps decoded are the bytes hashed
+        except (BadMaterialError, ChangedWhileReadingError) as exc:
             _record_failure(url, summary, label, row, STATUS_REJECTED, one_line(exc), existing)
             return
         except Exception as exc:  # decoder trouble: record, keep going
-            logger.exception("%s: unexpected error", label)
+            logger.debug("%s: unexpected error", label, exc_info=True)
             _record_failure(url, summary, label, row, STATUS_FAILED, f"{type(exc).__name__}: {one_line(exc)}",
                             existing)
             return

@@ -37,13 +37,16 @@ from photoshape_flow.geometry.preprocess import PreprocessOptions
 from photoshape_flow.geometry.raw import BadShapeError
 from photoshape_flow.geometry.sources import RejectedInput, ShapeItem, discover_shapes, materialize
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.inputs import ChangedWhileReadingError, check_unchanged
 from photoshape_flow.pipeline.ingest_common import (
     FailureWriter,
     IngestLimits,
     IngestSummary,
     Progress,
     adopt_renamed_row,
+    guard_item,
     one_line,
+    rejection_reason,
     resolve_settings,
     split_for,
     store_for,
@@ -177,17 +180,21 @@ def _ingest_item(
                 prepared = worker.call(prepare_shape, *args)
             else:
                 prepared = prepare_shape(*args)
-    except BadShapeError as exc:
+            check_unchanged(files.fingerprints)  # the mesh read is the bytes hashed
+    except (BadShapeError, ChangedWhileReadingError) as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, one_line(exc), existing)
         return
     except (WorkerCrashedError, WorkerTimeoutError) as exc:
         _record_failure(url, summary, label, row, STATUS_FAILED, f"importer {one_line(exc)}", existing)
         return
+    except MemoryError as exc:
+        _record_failure(url, summary, label, row, STATUS_REJECTED, rejection_reason(exc), existing)
+        return
     except OSError as exc:
         _record_failure(url, summary, label, row, STATUS_REJECTED, f"unreadable ({one_line(exc)})", existing)
         return
     except Exception as exc:  # a bug or an unforeseen library error: record, keep going
-        logger.exception("%s: unexpected error", label)
+        logger.debug("%s: unexpected error", label, exc_info=True)
         _record_failure(url, summary, label, row, STATUS_FAILED, f"{type(exc).__name__}: {one_line(exc)}", existing)
         return
     for warning in prepared.warnings:
@@ -255,7 +262,7 @@ def ingest_shapes(
                             license=license, attribution=attribution, archive_limits=limits.archive)
     seen: dict[tuple[str, str], str] = {}
     batch_ids = {item.source_id for item in items if isinstance(item, ShapeItem)}
-    worker = IsolatedWorker(limits.timeout_s) if isolate else None
+    worker = IsolatedWorker(limits.timeout_s, limits.memory_bytes) if isolate else None
     try:
         for done, item in enumerate(items, start=1):
             if isinstance(item, RejectedInput):
@@ -274,8 +281,9 @@ def ingest_shapes(
                                    "batch (use --source to tell them apart)")
                 else:
                     seen[key] = item.label
-                    _ingest_item(item, url=url, store=store, summary=summary, split=split, limits=limits,
-                                 options=options, worker=worker, batch_ids=batch_ids)
+                    guard_item(summary, item.label, lambda item=item: _ingest_item(
+                        item, url=url, store=store, summary=summary, split=split, limits=limits, options=options,
+                        worker=worker, batch_ids=batch_ids))
             if progress is not None:
                 progress(item.label, done, len(items))
     finally:

@@ -15,6 +15,30 @@ from sqlalchemy.orm import Session
 from photoshape_flow.db import models as m
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, ResolvedProfile, resolve_profile
 
+DIED = "died"  # the status of a run whose process ended without recording its end
+
+
+def mark_dead_runs(session: Session) -> list[int]:
+    """Mark `died` every `running` run whose process is provably gone; returns their ids.
+
+    A run killed (SIGKILL, out of memory, a lost machine) never reaches `finish_run`, so its row
+    said `running` forever and `photoshape status` counted it. Each run records its process like a
+    work claim does, and `db.holder.is_dead` (same host, pid gone or reused) decides; a run on
+    another host, or recorded before holders were, is left as it is: nothing there is provable.
+    Called by `status` and by every new run, so neither shows a dead run as running.
+    """
+    from photoshape_flow.db.base import utcnow
+    from photoshape_flow.db.holder import is_dead
+
+    rows = session.execute(sa.select(m.PipelineRun).where(m.PipelineRun.status == "running",
+                                                          m.PipelineRun.holder_pid.is_not(None))).scalars().all()
+    dead = [row for row in rows if is_dead(row.holder_host, row.holder_pid, row.holder_started)]
+    for row in dead:
+        row.status, row.finished_at = DIED, utcnow()
+        row.error = (f"its process ({row.holder_host}:{row.holder_pid}) ended without finishing the run "
+                     "(killed, or out of memory)")
+    return [row.id for row in dead]
+
 
 def last_run(session: Session) -> m.PipelineRun | None:
     return session.execute(sa.select(m.PipelineRun).order_by(m.PipelineRun.id.desc()).limit(1)).scalar_one_or_none()

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from photoshape_flow.pipeline import ingest_common
 from photoshape_flow.profiles import IngestConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -34,8 +35,19 @@ def _per_collection(ctx: StageContext, collection: str) -> Any:
     return lambda _label, done, total: ctx.progress(f"ingest {collection}", done, total)
 
 
-def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None) -> StageReport:
+def _collection(name: str, paths: list[Path], kwargs: dict[str, Any]) -> Any:
+    """One collection's ingest; should it raise outside its items (an unreadable folder while walking
+    it), that is one rejected line for the collection, and the other collections still go in: a poison
+    file in the inbox never fails a run."""
     from photoshape_flow.pipeline import ingest
+
+    summary = ingest.IngestSummary(name)
+    function = getattr(ingest, f"ingest_{name}")
+    done = ingest_common.guard_item(summary, ", ".join(str(p) for p in paths), lambda: function(paths, **kwargs))
+    return summary if done is None else done
+
+
+def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None) -> StageReport:
 
     request = work or IngestRequest()
     roots = request.roots
@@ -56,8 +68,7 @@ def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None)
             kwargs["size"] = cfg.exemplar_size
         if name == "materials":
             kwargs.update(previews=cfg.previews, preview_size=cfg.preview_size, events=ctx.events)
-        function = getattr(ingest, f"ingest_{name}")
-        summary = function(paths, **kwargs)
+        summary = _collection(name, paths, kwargs)
         report = report.merge(StageReport(
             "ingest", done=len(summary.added) + len(summary.replaced), skipped=len(summary.present),
             rejected=len(summary.rejected),

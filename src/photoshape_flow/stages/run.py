@@ -164,11 +164,16 @@ def _after_wait(before: StageReport, again: StageReport) -> StageReport:
 
 def start_run(ctx: StageContext, resolved: ResolvedProfile, stages: Sequence[str], origin: str) -> int:
     from photoshape_flow.db import models as m
+    from photoshape_flow.db.holder import this_process
+    from photoshape_flow.pipeline.runs import mark_dead_runs
 
     record = resolved.record()
+    holder = this_process()
     with ctx.session() as session:
+        mark_dead_runs(session)
         row = m.PipelineRun(origin=origin, profile_name=record["name"], overrides=record["overrides"],
-                            profile=record["profile"], stages=list(stages), reports={}, status="running")
+                            profile=record["profile"], stages=list(stages), reports={}, status="running",
+                            holder_host=holder.host, holder_pid=holder.pid, holder_started=holder.started)
         session.add(row)
         session.flush()
         return int(row.id)

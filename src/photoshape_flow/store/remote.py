@@ -33,6 +33,33 @@ from photoshape_flow.store.stored import BlobCorruptError, BlobNotFoundError, St
 SINGLE_PUT_PROTOCOLS = frozenset({"s3", "s3a", "gs", "gcs", "az", "abfs", "abfss", "adl", "oci", "memory"})
 
 
+class MissingBackendError(RuntimeError):
+    """The blob store's URL needs an fsspec backend package that is not installed (one line says which)."""
+
+
+def missing_backend(url: str) -> str | None:
+    """Why `url`'s fsspec backend cannot load (its package named, with the command to install it), or None.
+
+    fsspec itself raises ImportError deep in a call stack; this names the package in one line, before
+    anything is opened, for the CLI and the flows alike.
+    """
+    import importlib.util
+
+    from fsspec.registry import known_implementations, registry
+
+    protocol = url.split("://", 1)[0].lower()
+    if protocol in registry:
+        return None
+    known = known_implementations.get(protocol)
+    if known is None:
+        return f"blob store {mask_password(url)}: unknown scheme {protocol}:// (no fsspec backend implements it)"
+    package = str(known["class"]).split(".", 1)[0]
+    if importlib.util.find_spec(package) is not None:
+        return None
+    return (f"blob store {mask_password(url)}: the {protocol}:// backend needs the {package} package, which is not "
+            f"installed (pip install {package})")
+
+
 class FsspecBackend:
     """Blobs at `url`, cached under `cache_root` on this machine."""
 
@@ -41,6 +68,9 @@ class FsspecBackend:
 
         self.url = url
         self.shown_url = mask_password(url)
+        missing = missing_backend(url)
+        if missing is not None:
+            raise MissingBackendError(missing)
         self.fs, base = url_to_fs(url)
         self.base = base.rstrip("/")
         protocols = {self.fs.protocol} if isinstance(self.fs.protocol, str) else set(self.fs.protocol)
