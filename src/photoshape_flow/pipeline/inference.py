@@ -44,6 +44,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.method_keys import MethodKey
 from photoshape_flow.pipeline.calibration import (
     material_lab,
     stored_color_prior,
@@ -387,7 +388,7 @@ def run_inference(
     with session_scope(url) as session:
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
         ctx = _Context(session, store, method, classifier, settings, top_k, color_prior, calibrate_substances)
-        method_key = f"classifier:{classifier.id}" if classifier is not None else method
+        method_key = str(MethodKey.for_classifier(classifier.id) if classifier is not None else MethodKey(method))
         expected = pair_hashes(session, stable_hash(ctx.params), pair_ids)
         todo = pending_pairs(session, method_key, expected)
     summary = InferenceSummary(method_key=method_key)
