@@ -65,6 +65,7 @@ def probe(profile: str, pairs: int, overrides: list[str]) -> dict:
     """Runs the stage (this process is fresh) and returns its summary and timings."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
+    from photoshape_flow.method_keys import MethodKey
     from photoshape_flow.pipeline.fit import fit_pairs_of, run_fit
     from photoshape_flow.pipeline.inference import resolve_classifier
     from photoshape_flow.profiles import resolve_profile
@@ -75,7 +76,7 @@ def probe(profile: str, pairs: int, overrides: list[str]) -> dict:
         classifier = resolve_classifier(session)
         if classifier is None:
             raise SystemExit("no trained classifier in this data root: run the pipeline to `inference` first")
-        todo = fit_pairs_of(session, f"classifier:{classifier.id}")
+        todo = fit_pairs_of(session, str(MethodKey.for_classifier(classifier.id)))
     todo = todo[:pairs] if pairs > 0 else todo
     imported = time.perf_counter() - START
     summary = run_fit(cfg, pair_ids=todo, settings=settings)

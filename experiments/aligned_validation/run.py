@@ -52,10 +52,10 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.assignment import median_lab, substance_vector
-from photoshape_flow.classify.color_prior import color_likelihood, fit_color_sigma
-from photoshape_flow.classify.configs import ClassifierConfig
-from photoshape_flow.classify.ranking import PartEvidence, substance_first_order
+from photoshape_flow.classify.color_prior import fit_color_sigma
+from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.classify.ranking import scores as ranking_scores
+from photoshape_flow.classify.ranking import substance_first_order
 from photoshape_flow.classify.substance_calibration import fit_temperature, temper
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_train import predict_substances
@@ -179,7 +179,8 @@ def main() -> None:
     store = BlobStore(settings.blob_root)
     fine = FineParams(size=PROFILES[args.profile].fine_alignment.size)
     row, clf = load_material_classifier(settings=settings)
-    min_fraction = float((row.config or {}).get("min_region_fraction", ClassifierConfig.min_region_fraction))
+    policy = ClassifierEvidence.for_classifier(clf, row.config).policy
+    min_fraction = policy.min_region_fraction
     index = {mid: i for i, mid in enumerate(clf.materials)}
     renderer = Renderer(resolve=store.resolve)
     inputs = RenderInputs(store=store)
@@ -275,14 +276,11 @@ def main() -> None:
     for r in records:
         r["material_substances"] = subs
 
-    policy = clf.policy()
-
     def scores(r: dict, use_head: bool, use_colour: bool, t: float | None, s: float) -> np.ndarray:
-        return ranking_scores(policy, PartEvidence(
-            material_probs=np.asarray(r["head"]) if use_head else None,
-            substance_weights=substance_vector(temper(dict(zip(SUBSTANCES, r["network_probs"], strict=True)), t)),
-            color_weights=color_likelihood(r["lab"], labs, s) if use_colour else None,
-        ))
+        evidence = ClassifierEvidence(policy, (labs, s) if use_colour else None)
+        return ranking_scores(policy, evidence.of_lab(
+            np.asarray(r["head"]) if use_head else None,
+            substance_vector(temper(dict(zip(SUBSTANCES, r["network_probs"], strict=True)), t)), r["lab"]))
 
     def ranking(small_rule: str, t: float | None = temperature, s: float = sigma):
         def rank(r: dict) -> int | None:

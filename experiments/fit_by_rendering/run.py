@@ -18,6 +18,7 @@ from pathlib import Path
 
 from experiments.common import results_dir
 from photoshape_flow.config import get_settings
+from photoshape_flow.method_keys import CLASSIFIER, FIT, method_of
 from photoshape_flow.pipeline.evaluate import run_evaluation
 from photoshape_flow.pipeline.fit import run_fit
 from photoshape_flow.profiles import resolve_profile
@@ -52,7 +53,7 @@ def main() -> None:
         _, metrics = run_evaluation(groundtruth, f"fit-{name}", stages=["inference"], settings=settings,
                                     rerender_max_pairs=0)
         figures = {f"{x.method} {x.metric}": [round(x.value, 4) if x.value is not None else None, x.count]
-                   for x in metrics if x.metric in FIGURES and x.method.split(":")[0] in ("fit", "classifier")}
+                   for x in metrics if x.metric in FIGURES and method_of(x.method) in (FIT, CLASSIFIER)}
         results[name] = {"overrides": overrides, "pairs": summary.pairs_done, "seconds": round(seconds, 1),
                          "weights": summary.weights, "figures": figures}
         print(name, overrides, f"{summary.pairs_done} pairs in {seconds:.1f} s", summary.weights)

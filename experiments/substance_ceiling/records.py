@@ -33,6 +33,7 @@ from sqlalchemy.orm import Session
 from photoshape_flow.align.partmap import resize_labels
 from photoshape_flow.classify.assignment import median_lab
 from photoshape_flow.classify.dataset import load_label_map, load_rgb
+from photoshape_flow.classify.evidence import min_region_fraction
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import get_settings
@@ -142,7 +143,7 @@ def main() -> None:
     store = BlobStore(settings.blob_root)
     row, clf = load_material_classifier(settings=settings)
     index = {mid: i for i, mid in enumerate(clf.materials)}
-    min_fraction = float((row.config or {}).get("min_region_fraction", 0.005))
+    min_fraction = min_region_fraction(row.config)
     validation: list[dict] = []
     exemplars: list[dict] = []
     with session_scope() as session:

@@ -27,6 +27,7 @@ from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.classify.substance_configs import PRESETS as SUBSTANCE_PRESETS
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
 from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS
+from photoshape_flow.method_keys import FIT, method_of
 from photoshape_flow.vocab import ASSIGNMENT_METHODS
 
 
@@ -141,7 +142,7 @@ DEFAULT_PUBLISH_METHOD = "fit"  # ahead of the classifier's ranking on the secon
 
 def writing_stage(method: str) -> str:
     """The stage that writes a method's (or method key's) assignments: `fit` its own, inference the others."""
-    return "fit" if method.partition(":")[0] == "fit" else "inference"
+    return "fit" if method_of(method) == FIT else "inference"
 
 
 @dataclass(frozen=True)

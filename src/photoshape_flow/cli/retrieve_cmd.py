@@ -39,10 +39,7 @@ def retrieve(
     import numpy as np
     import sqlalchemy as sa
 
-    from photoshape_flow.classify.assignment import median_lab
-    from photoshape_flow.classify.color_prior import color_likelihood
-    from photoshape_flow.classify.configs import ClassifierConfig
-    from photoshape_flow.classify.ranking import PartEvidence, rank_part
+    from photoshape_flow.classify.evidence import ClassifierEvidence
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.models import Classifier, Material
     from photoshape_flow.db.session import session_scope
@@ -76,20 +73,16 @@ def retrieve(
     with session_scope(settings.resolved_database_url) as session:
         prior = stored_color_prior(session, BlobStore(settings.blob_root), model.materials,
                                    session.get(Classifier, row.id)) if color_prior else None
-    policy = model.policy((row.config or {}).get("min_region_fraction", ClassifierConfig.min_region_fraction))
+    evidence = ClassifierEvidence.for_classifier(model, row.config, color_prior=prior)
+    # with crop="mask" the head sees the region enlarged: its size in the photo does not matter
+    parts = evidence.rank_regions(photo, masks, material_probs, substance_probs if substance_weighting else None,
+                                  top, measured=crop == "image")
     ranked = []
-    for i, (path, region) in enumerate(zip(mask, masks, strict=True)):
-        evidence = PartEvidence(
-            material_probs=material_probs[i], substance_weights=substance_probs[i] if substance_weighting else None,
-            color_weights=color_likelihood(median_lab(photo, region), *prior) if prior is not None else None,
-            # with crop="mask" the head sees the region enlarged: its size in the photo does not matter
-            region_fraction=float(region.mean()) if crop == "image" else None,
-        )
-        part = rank_part(evidence, policy, top)
+    for path, region, part in zip(mask, masks, parts, strict=True):
         if not part.head_used:
             err_console.print(f"[yellow]warning:[/] {path}: the region covers {region.mean():.2%} of the photo, "
-                              f"less than the {policy.min_region_fraction:.1%} the classifier was trained on: "
-                              "ranked without its material head (or use --crop mask)", highlight=False)
+                              f"less than the {evidence.policy.min_region_fraction:.1%} the classifier was trained "
+                              "on: ranked without its material head (or use --crop mask)", highlight=False)
         ranked.append(part.materials)
     ids = sorted({r.material_id for regions in ranked for r in regions})
     with session_scope(settings.resolved_database_url) as session:

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from photoshape_flow.method_keys import CLASSIFIER, classifier_id_of, method_of
 from photoshape_flow.vocab import ASSIGNMENT_METHODS
 
 # (metric, column title): short titles so the table fits an 80-column terminal; HEADLINE_TITLE says
@@ -32,7 +33,7 @@ HEADLINE_TITLE = ("ours, then each baseline: material top-1 / top-5 and substanc
                   "substance, are those of the selection)")
 STAGES_TITLE = ("shared stages: recall and pose over exemplars of a collection shape (pose: those with a "
                 "camera), part labels over pairs of the true shape with a part mask, substances over parts")
-OURS = "classifier"
+OURS = CLASSIFIER
 REFINED = "_refined"  # suffix of a rendered figure made with the rank-1 rows' refinements (`pipeline.rerender_eval`)
 MISSING = "-"
 
@@ -43,15 +44,15 @@ def fmt(value: float | None, digits: int = 3) -> str:
 
 def _method_order(method_key: str) -> tuple[int, int, str]:
     """Ours first (the newest classifier first), then the baselines in the order tables list them."""
-    base, _, suffix = method_key.partition(":")
+    base, classifier_id = method_of(method_key), classifier_id_of(method_key)
     rank = ASSIGNMENT_METHODS.index(base) if base in ASSIGNMENT_METHODS else len(ASSIGNMENT_METHODS)
-    return rank, -int(suffix) if suffix.isdigit() else 0, method_key
+    return rank, -classifier_id if classifier_id is not None else 0, method_key
 
 
 def _method_label(method_key: str) -> str:
-    base, _, suffix = method_key.partition(":")
-    if base == OURS:
-        return f"ours (classifier {suffix})" if suffix else "ours"
+    if method_of(method_key) == OURS:
+        classifier_id = classifier_id_of(method_key)
+        return f"ours (classifier {classifier_id})" if classifier_id is not None else "ours"
     return method_key
 
 
@@ -60,7 +61,7 @@ def headline_rows(metrics: Sequence[Any]) -> list[dict[str, str]]:
     how far top-1 lies from ours. Narrow on purpose (fits 80 columns); counts are in the full table."""
     values = {(x.method, x.metric): x for x in metrics if x.stage == "inference"}
     methods = sorted({method for method, _ in values}, key=_method_order)
-    ours = next((k for k in methods if k.partition(":")[0] == OURS), None)
+    ours = next((k for k in methods if method_of(k) == OURS), None)
     reference = values.get((ours, "material_top1")) if ours else None
     rows = []
     for method in methods:

@@ -29,13 +29,8 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.assignment import foreground_of_render, median_lab
-from photoshape_flow.classify.color_prior import (
-    color_likelihood,
-    fit_color_sigma,
-    material_lab_matrix,
-    region_color_distances,
-)
-from photoshape_flow.classify.ranking import PartEvidence, rank_part
+from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -161,7 +156,6 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     store = BlobStore(settings.blob_root)
     url = settings.resolved_database_url
     row, model = load_material_classifier(classifier_id, settings)
-    config = row.config or {}
     with session_scope(url) as session:
         data = training_data(session, store)
         classifier = session.get(m.Classifier, classifier_id)
@@ -174,8 +168,9 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
             return dict(metrics["posterior_reliability"])
         prior = stored_color_prior(session, store, model.materials, classifier)
         enabled = frozenset(session.execute(sa.select(m.Material.id).where(m.Material.enabled)).scalars())
-    policy = model.policy(float(config.get("min_region_fraction", 0.0)), enabled=enabled)
-    confidence, correct = _ranked_regions(model, policy, data.val[:limit], prior, bool(config.get("frame_object")))
+    evidence = ClassifierEvidence.for_classifier(model, row.config, enabled=enabled, color_prior=prior)
+    framed = bool((row.config or {}).get("frame_object"))
+    confidence, correct = _ranked_regions(model, evidence, data.val[:limit], framed)
     result = reliability(np.asarray(confidence), np.asarray(correct)).to_dict()
     log.info("classifier %d: posterior ECE %s on %d validation regions (accuracy %s, mean posterior %s)",
              classifier_id, result["ece"], result["regions"], result["accuracy"], result["mean_posterior"])
@@ -187,7 +182,7 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     return result
 
 
-def _ranked_regions(model: Any, policy: Any, items: Sequence[Any], prior: tuple[np.ndarray, float] | None,
+def _ranked_regions(model: Any, evidence: ClassifierEvidence, items: Sequence[Any],
                     framed: bool) -> tuple[list[float], list[bool]]:
     """(top posterior, right?) of every large-enough material region of `items`; unreadable renders skipped."""
     from photoshape_flow.classify.dataset import frame_object, load_label_map, load_rgb
@@ -195,6 +190,7 @@ def _ranked_regions(model: Any, policy: Any, items: Sequence[Any], prior: tuple[
     confidence: list[float] = []
     correct: list[bool] = []
     known = set(model.materials)
+    policy = evidence.policy
     for item in items:
         try:
             image, ids = load_rgb(item.image), load_label_map(item.material_map)
@@ -211,11 +207,8 @@ def _ranked_regions(model: Any, policy: Any, items: Sequence[Any], prior: tuple[
             continue
         masks = [ids == v for v in regions]
         mats, subs = model.predict(image, masks)
-        for i, (material, mask) in enumerate(zip(regions, masks, strict=True)):
-            colors = color_likelihood(median_lab(image, mask), *prior) if prior is not None else None
-            evidence = PartEvidence(material_probs=mats[i], substance_weights=subs[i], color_weights=colors,
-                                    region_fraction=float(mask.sum()) / mask.size)
-            top = rank_part(evidence, policy, 1).materials
+        for material, ranked in zip(regions, evidence.rank_regions(image, masks, mats, subs, 1), strict=True):
+            top = ranked.materials
             if top:
                 confidence.append(top[0].posterior)
                 correct.append(top[0].material_id == material)

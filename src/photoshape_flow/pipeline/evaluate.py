@@ -44,6 +44,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.evaluation.bootstrap import OBSERVATIONS, Observations, difference_interval, mean_interval
 from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
+from photoshape_flow.method_keys import CLASSIFIER, classifier_id_of, method_of
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
 from photoshape_flow.pipeline.rerender_eval import RerenderScores, rendered_variants
@@ -295,8 +296,8 @@ def inference_observations(
 
 def ours_key(method_keys: Iterable[str]) -> str | None:
     """The newest classifier's method key ("classifier:<highest id>"): what every other method is compared with."""
-    ours = [k for k in method_keys if k.partition(":")[0] == "classifier" and k.partition(":")[2].isdigit()]
-    return max(ours, key=lambda k: int(k.partition(":")[2]), default=None)
+    ours = {k: i for k in method_keys if method_of(k) == CLASSIFIER and (i := classifier_id_of(k)) is not None}
+    return max(ours, key=ours.__getitem__, default=None)
 
 
 def inference_metrics(scores: Scores) -> list[Metric]:

@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 import sqlalchemy as sa
 
+from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -138,30 +139,21 @@ class RenderRanker:
         with session_scope(settings.resolved_database_url) as session:
             classifier = session.get(m.Classifier, row.id)
             assert classifier is not None
-            self.prior = stored_color_prior(session, ctx.store, self.model.materials, classifier)
-        self.policy = self.model.policy(float((row.config or {}).get("min_region_fraction", 0.0)),
-                                        enabled=frozenset(ctx.material_substance))
+            prior = stored_color_prior(session, ctx.store, self.model.materials, classifier)
+        self.evidence = ClassifierEvidence.for_classifier(self.model, row.config,
+                                                          enabled=frozenset(ctx.material_substance), color_prior=prior)
 
     def rank(self, image: np.ndarray, masks: dict[int, np.ndarray]) -> dict[int, list[m.Assignment]]:
         """Part index -> transient (never added) assignment rows, best first, as `pipeline.fit` reads them."""
-        from photoshape_flow.classify.assignment import median_lab
-        from photoshape_flow.classify.color_prior import color_likelihood
-        from photoshape_flow.classify.ranking import PartEvidence, rank_part
-
         indices = sorted(masks)
         if not indices:
             return {}
-        mats, subs = self.model.predict(image, [masks[i] for i in indices])
-        out = {}
-        for k, index in enumerate(indices):
-            mask = masks[index]
-            colors = color_likelihood(median_lab(image, mask), *self.prior) if self.prior is not None else None
-            evidence = PartEvidence(material_probs=mats[k], substance_weights=subs[k], color_weights=colors,
-                                    region_fraction=float(mask.sum()) / mask.size)
-            ranked = rank_part(evidence, self.policy, self.top_k).materials
-            out[index] = [m.Assignment(rank=r + 1, material_id=x.material_id, score=x.score, substance=x.substance,
-                                       unobserved=False) for r, x in enumerate(ranked)]
-        return out
+        regions = [masks[i] for i in indices]
+        mats, subs = self.model.predict(image, regions)
+        ranked = self.evidence.rank_regions(image, regions, mats, subs, self.top_k)
+        return {index: [m.Assignment(rank=r + 1, material_id=x.material_id, score=x.score, substance=x.substance,
+                                     unobserved=False) for r, x in enumerate(part.materials)]
+                for index, part in zip(indices, ranked, strict=True)}
 
 
 def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Settings,

@@ -22,12 +22,13 @@ from photoshape_flow.db import models as m
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.scene import FitScene, FrameRenderer
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.method_keys import FIT, MethodKey
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
-METHOD = "fit"
+METHOD = FIT
 CODE_VERSION = "fit-8"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
 #                         fit-4: renders blended with the photo's background at the silhouette (D41);
 #                         fit-5: each candidate judged at its own best exposure (D42);
@@ -66,8 +67,8 @@ class FitContext:
         self.store = store
         self.cfg = cfg
         self.classifier = classifier
-        self.source_key = f"classifier:{classifier.id}"
-        self.method_key = f"{METHOD}:{classifier.id}"
+        self.source_key = str(MethodKey.for_classifier(classifier.id))
+        self.method_key = str(MethodKey.fit_of(classifier.id))
         mats = session.execute(
             sa.select(m.Material).where(m.Material.enabled, m.Material.status == STATUS_OK).order_by(m.Material.id)
         ).scalars().all()

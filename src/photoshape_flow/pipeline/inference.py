@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
@@ -31,12 +31,10 @@ from photoshape_flow.classify.assignment import (
     RankedMaterial,
     color_match,
     median_lab,
-    one_substance,
     random_of_substance,
     substance_vector,
 )
-from photoshape_flow.classify.color_prior import color_likelihood
-from photoshape_flow.classify.ranking import PartEvidence, RankingPolicy, rank_part
+from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
@@ -44,6 +42,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.method_keys import MethodKey
 from photoshape_flow.pipeline.calibration import (
     material_lab,
     stored_color_prior,
@@ -164,7 +163,6 @@ class _Context:
         self.classifier = classifier
         self.model = None
         self.bn_prior: float | None = None
-        self.min_region_fraction = 0.0
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
@@ -177,12 +175,6 @@ class _Context:
             self.bn_prior = stored_bn_prior(classifier)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device,
                                          bn_prior=self.bn_prior)
-            from photoshape_flow.classify.configs import ClassifierConfig
-
-            # the smallest region (share of the image) the classifier trained on: below it the head's
-            # output is not evidence (validation renders: top-1 0.08, substance of top-1 at chance)
-            self.min_region_fraction = float((classifier.config or {}).get(
-                "min_region_fraction", ClassifierConfig.min_region_fraction))
         self.material_labs: dict[int, np.ndarray] = {}
         if method == "color-match":
             for mat in mats:
@@ -190,12 +182,12 @@ class _Context:
                 if lab is not None:
                     self.material_labs[mat.id] = lab
         self.color_sigma: float | None = None
-        self.model_labs: np.ndarray | None = None
+        prior: tuple[np.ndarray, float] | None = None
         if method == "classifier" and color_prior:
             assert self.model is not None and classifier is not None
             prior = stored_color_prior(session, store, self.model.materials, classifier)
             if prior is not None:
-                self.model_labs, self.color_sigma = prior
+                self.color_sigma = prior[1]
             else:
                 log.warning("classifier %s: no stored colour sigma (the training stage fits it) or no material "
                             "colours: ranking without the colour likelihood", classifier.id)
@@ -204,10 +196,13 @@ class _Context:
         if method == "classifier" and calibrate_substances:
             for network in substance_networks(session):
                 self.substance_temperatures[network] = stored_temperature(session, network)
-        self.policy: RankingPolicy | None = None
+        self.evidence: ClassifierEvidence | None = None
         if self.model is not None:
+            assert classifier is not None
             # materials disabled since training can neither be chosen nor lend their substance mass
-            self.policy = self.model.policy(self.min_region_fraction, enabled=frozenset(self.material_substance))
+            self.evidence = ClassifierEvidence.for_classifier(self.model, classifier.config,
+                                                              enabled=frozenset(self.material_substance),
+                                                              color_prior=prior)
 
     @property
     def params(self) -> dict[str, Any]:
@@ -268,20 +263,16 @@ def _rank_part(ctx: _Context, image: np.ndarray, fg: np.ndarray, item: _PartInpu
             return []
         return color_match(lab, ctx.material_labs, ctx.material_substance, ctx.top_k,
                            substance=None if item.mask is not None else sub.substance)
-    # ours: the evidence of the part, ranked by the one policy (classify.ranking)
-    assert ctx.model is not None and ctx.policy is not None
-    evidence = PartEvidence(material_probs=batch[item.part.id][0], substance=sub.substance)
+    # ours: the evidence of the part (classify.evidence), ranked by the one policy (classify.ranking)
+    assert ctx.evidence is not None
+    head = batch[item.part.id][0]
     if item.mask is not None:
-        colors = None
-        if ctx.color_sigma is not None and ctx.model_labs is not None:
-            colors = color_likelihood(median_lab(image, item.mask), ctx.model_labs, ctx.color_sigma)
-            item.color = dict(zip(ctx.model.materials, colors.tolist(), strict=True))
-        evidence = replace(evidence, substance_weights=ctx.substance_weights(sub), color_weights=colors,
-                           region_fraction=float(item.mask.sum()) / item.mask.size)
+        evidence = ctx.evidence.region(head, ctx.substance_weights(sub), image, item.mask, substance=sub.substance)
+        if evidence.color_weights is not None:
+            item.color = dict(zip(ctx.evidence.policy.materials, evidence.color_weights.tolist(), strict=True))
     else:  # unobserved: only the prior substance's materials
-        evidence = replace(evidence, substance_weights=one_substance(sub.substance) if sub.substance
-                           else substance_vector(None))
-    ranked = rank_part(evidence, ctx.policy, ctx.top_k)
+        evidence = ctx.evidence.unobserved(head, sub.substance)
+    ranked = ctx.evidence.rank(evidence, ctx.top_k)
     item.head = ranked.head_used
     return [RankedMaterial(r.material_id, r.substance, r.score, r.posterior) for r in ranked.materials]
 
@@ -387,7 +378,7 @@ def run_inference(
     with session_scope(url) as session:
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None
         ctx = _Context(session, store, method, classifier, settings, top_k, color_prior, calibrate_substances)
-        method_key = f"classifier:{classifier.id}" if classifier is not None else method
+        method_key = str(MethodKey.for_classifier(classifier.id) if classifier is not None else MethodKey(method))
         expected = pair_hashes(session, stable_hash(ctx.params), pair_ids)
         todo = pending_pairs(session, method_key, expected)
     summary = InferenceSummary(method_key=method_key)

@@ -26,6 +26,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
+from photoshape_flow.method_keys import MethodKey
 from photoshape_flow.pipeline.training import material_set, newest_material_classifier
 from photoshape_flow.profiles import resolve_profile
 
@@ -86,18 +87,17 @@ def affected_pairs(session: Session) -> tuple[str | None, list[int]]:
     join; a pair with no observed part keeps the classifier's ranking and is left alone.
     """
     from photoshape_flow.pipeline.fit import fit_pairs_of
-    from photoshape_flow.pipeline.fit_context import METHOD
     from photoshape_flow.pipeline.inference import resolve_classifier
 
     classifier = resolve_classifier(session)
     if classifier is None:
         return None, []
-    source = f"classifier:{classifier.id}"
+    source = str(MethodKey.for_classifier(classifier.id))
     observed = set(session.execute(
         sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == source, m.Assignment.rank == 1,
                                               ~m.Assignment.unobserved)
     ).scalars())
-    return f"{METHOD}:{classifier.id}", [p for p in fit_pairs_of(session, source) if p in observed]
+    return str(MethodKey.fit_of(classifier.id)), [p for p in fit_pairs_of(session, source) if p in observed]
 
 
 @dataclass(frozen=True)

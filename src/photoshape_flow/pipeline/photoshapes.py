@@ -29,6 +29,7 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
 from photoshape_flow.export.assignment import PartAssignment, Provenance, assignment_document
+from photoshape_flow.method_keys import is_method_name
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
@@ -75,7 +76,7 @@ def candidate_method_keys(session: Session, method: str | None, pair_ids: Sequen
     for pair_id, method_key, row_method, classifier_id in session.execute(query):
         if method_key == method:
             best[pair_id] = (1 << 62, method_key)  # an exact key always wins
-        elif row_method == method and ":" not in method:
+        elif row_method == method and is_method_name(method):
             rank = classifier_id or 0
             if pair_id not in best or best[pair_id][0] < rank:
                 best[pair_id] = (rank, method_key)

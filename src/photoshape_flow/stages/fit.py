@@ -6,6 +6,7 @@ Fans out over the pairs the newest material classifier ranked; the pipeline clai
 
 from __future__ import annotations
 
+from photoshape_flow.method_keys import MethodKey
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport, blocked_by
@@ -23,7 +24,7 @@ def plan(ctx: StageContext, cfg: FitConfig) -> list[WorkUnit]:
         classifier = resolve_classifier(session)
         if classifier is None:
             return []
-        return [WorkUnit("pairs", tuple(fit_pairs_of(session, f"classifier:{classifier.id}")))]
+        return [WorkUnit("pairs", tuple(fit_pairs_of(session, str(MethodKey.for_classifier(classifier.id)))))]
 
 
 def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> StageReport:
