@@ -202,7 +202,6 @@ def test_the_parser_sees_the_package() -> None:
                    (f"{PACKAGE}.store.blobstore", True)]
 
 
-@pytest.mark.xfail(strict=True, reason="issue 43: the 9-module circle of the fit, training and substances stages")
 def test_no_import_circle() -> None:
     """Module-level and function-local imports together form no circle."""
     cycle = find_cycle(_graph())

@@ -163,8 +163,8 @@ def test_a_chosen_prior_enters_the_fit_calibrations_key_and_no_prior_leaves_it()
     from types import SimpleNamespace
 
     from photoshape_flow.db import models as m
-    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
     from photoshape_flow.pipeline.fit_calibration import calibration_key
+    from photoshape_flow.pipeline.training import stored_bn_prior
     from photoshape_flow.profiles import FitConfig
 
     def ctx(metrics: dict) -> SimpleNamespace:

@@ -75,13 +75,16 @@ def test_the_former_callers_rank_a_region_alike(tmp_path: Path, settings_env: Pa
     def no_database(*_: Any, **__: Any) -> Any:
         yield SimpleNamespace(get=lambda *_: row, execute=lambda *_: [])
 
-    monkeypatch.setattr(training, "load_material_classifier", lambda *_, **__: (row, model))
-    monkeypatch.setattr(calibration, "stored_color_prior", lambda *_: (LABS, SIGMA))
+    for module in (training, fit_calibration):  # `retrieve` finds them in training and calibration
+        monkeypatch.setattr(module, "load_material_classifier", lambda *_, **__: (row, model))
+    for module in (calibration, fit_calibration):
+        monkeypatch.setattr(module, "stored_color_prior", lambda *_: (LABS, SIGMA))
     monkeypatch.setattr(fit_calibration, "session_scope", no_database)
     monkeypatch.setattr(db_session, "session_scope", no_database)
     monkeypatch.setattr(retrieve_cmd, "require_database", lambda: None)
-    monkeypatch.setattr(dataset, "load_rgb", lambda _: image)
-    monkeypatch.setattr(dataset, "load_label_map", lambda _: ids)
+    for module in (dataset, calibration):  # the posterior check reads renders with these
+        monkeypatch.setattr(module, "load_rgb", lambda _: image)
+        monkeypatch.setattr(module, "load_label_map", lambda _: ids)
     built = ClassifierEvidence.for_classifier(model, config, enabled=frozenset(MATERIALS), color_prior=(LABS, SIGMA))
 
     # the inference stage (its _Context builds `built` from the classifier row the same way)

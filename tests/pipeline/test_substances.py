@@ -63,7 +63,7 @@ def test_substances_stage_end_to_end_and_idempotent(
     hidden_part = _add_alignments(db_url, store, col)
 
     # a run killed after the first epoch leaves a resumable checkpoint behind
-    from photoshape_flow.classify import substance_train
+    from photoshape_flow.pipeline import substances as substance_train  # where train_or_resume finds it
 
     original = substance_train.train_substance_net
 

@@ -12,10 +12,10 @@ import typer
 from tests.classify.regiondata import render_arrays
 from typer.testing import CliRunner
 
-from photoshape_flow.classify import train as train_module
 from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.pipeline import training as train_module  # run_training calls train_classifier from here
 from photoshape_flow.pipeline.training import load_material_classifier, run_training
 
 TOY = {"oak": ("wood", (150, 90, 40)), "denim": ("fabric", (40, 60, 170)), "steel": ("metal", (120, 120, 130))}

@@ -3,7 +3,7 @@
 How strongly a photo's own statistics should replace the training set's depends on how far photos
 are from the training renders, which no constant knows. It is chosen like every other weight of the
 ranking: on the collection's validation renders (val shapes, val envmaps), each degraded like an
-exemplar at the exemplars' size (`fit_calibration.as_photo`: exposure, white balance, blur, noise,
+exemplar at the exemplars' size (`validation_photos.as_photo`: exposure, white balance, blur, noise,
 JPEG) with its part map misaligned as fine alignment errs, never on exemplars or evaluation worlds.
 The candidate with the lowest mean log-loss of the truth, after its own maximum-likelihood
 temperature (`region_losses`), wins if it beats no adaptation beyond noise (a paired bootstrap over
@@ -16,7 +16,8 @@ the renders, `choose`); otherwise the network reads photos as trained:
   the validation renders that exist then (the bootstrap round's), read when it labels the parts.
 
 Each is stored in its network's `metrics` as `bn_prior_choice` (the prior and every candidate's
-log-loss), keyed by the checkpoint and the renders (`bn_prior_key`).
+log-loss), keyed by the checkpoint and the renders (`bn_prior_key`); `pipeline.training.stored_bn_prior`
+reads it back where a network is loaded.
 """
 
 from __future__ import annotations
@@ -29,12 +30,18 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
+from photoshape_flow.classify.substance_calibration import fit_temperature
+from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.fit.validation import misalign, resampled, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
-from photoshape_flow.pipeline.fit_calibration import validation_renders
+from photoshape_flow.pipeline.training import load_material_classifier
+from photoshape_flow.pipeline.validation_photos import as_photo, exemplar_size, validation_renders
 from photoshape_flow.store import BlobStore
+from photoshape_flow.synth.spec import RenderSpec
+from photoshape_flow.vocab import SUBSTANCE_LABELS
 
 log = logging.getLogger(__name__)
 
@@ -67,10 +74,6 @@ def photo_cases(session: sa.orm.Session, store: BlobStore, settings: Settings, c
 
     `degrade=False`: the clean render with its exact part map (the classifier's own domain).
     """
-    from photoshape_flow.fit.validation import misalign, resampled, sample_misalignment
-    from photoshape_flow.pipeline.fit_calibration import as_photo, exemplar_size
-    from photoshape_flow.synth.spec import RenderSpec
-
     size = exemplar_size(session)
     out = []
     for row in validation_renders(session, count, settings.seed, kinds):
@@ -118,8 +121,6 @@ def region_losses(readings: Readings) -> np.ndarray:
     ranking re-calibrates confidence anyway (posterior, part temperature): what the prior should win
     on is how well the truth is told apart, not how confident the network happens to be.
     """
-    from photoshape_flow.classify.substance_calibration import fit_temperature
-
     probs, truth, _ = readings
     if not len(truth):
         return np.zeros(0)
@@ -163,8 +164,6 @@ def choose(losses: dict[float | None, np.ndarray], groups: np.ndarray, draws: in
 
 def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS) -> dict[str, Any]:
     """Choose (or read back) the material classifier's prior; returns {"bn_prior", "log_loss", "regions"}."""
-    from photoshape_flow.pipeline.training import load_material_classifier
-
     row, model = load_material_classifier(classifier_id, settings)
     with session_scope(settings.resolved_database_url) as session:
         enabled = set(session.execute(sa.select(m.Material.id).where(m.Material.enabled)).scalars())
@@ -179,9 +178,6 @@ def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS
 def substance_readings(network: Any, size: int, cases: list[PhotoCase], substance_of: dict[int, str],
                        prior: float | None) -> Readings:
     """Each scored part's mean substance probability (background left out, renormalised), the truth, the case."""
-    from photoshape_flow.classify.substance_recognition import substance_map
-    from photoshape_flow.vocab import SUBSTANCE_LABELS
-
     probs, truth, group = [], [], []
     for c, case in enumerate(cases):
         labels = np.zeros(case.image.shape[:2], np.int32)
@@ -241,10 +237,3 @@ def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | Non
         if row is not None and row.checkpoint_blob == checkpoint:
             row.metrics = {**(row.metrics or {}), "bn_prior_choice": result, "bn_prior_key": key}
     return result
-
-
-def stored_bn_prior(classifier: m.Classifier | None) -> float | None:
-    """The chosen prior on a network's row (None: not chosen, or no adaptation won)."""
-    choice = (classifier.metrics or {}).get("bn_prior_choice") if classifier is not None else None
-    value = choice.get("bn_prior") if isinstance(choice, dict) else None
-    return None if value is None else float(value)

@@ -30,11 +30,16 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.assignment import foreground_of_render, median_lab
 from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.classify.dataset import frame_object, load_label_map, load_rgb
 from photoshape_flow.classify.evidence import ClassifierEvidence
+from photoshape_flow.classify.reliability import reliability
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.bn_prior import choose_bn_prior
+from photoshape_flow.pipeline.substances import substance_temperature
+from photoshape_flow.pipeline.training import load_material_classifier, stored_bn_prior, training_data
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -53,8 +58,6 @@ def fit_classifier_color_sigma(
     renders and the material colours), so `photoshape retrieve` and later inference runs do not
     re-read hundreds of renders; the caller's session commits it.
     """
-    from photoshape_flow.pipeline.training import training_data
-
     data = training_data(session, store)
     key = stable_hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
                        "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
@@ -122,9 +125,6 @@ def substance_networks(session: Session) -> list[int]:
 
 def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
     """Fit (or confirm the cached) colour sigma of a material classifier and every substance temperature."""
-    from photoshape_flow.pipeline.bn_prior import choose_bn_prior
-    from photoshape_flow.pipeline.substances import substance_temperature
-
     store = BlobStore(settings.blob_root)
     with session_scope(settings.resolved_database_url) as session:
         classifier = session.get(m.Classifier, classifier_id)
@@ -149,10 +149,6 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     and the ECE (`classify.reliability`), stored in the classifier's `metrics` and keyed by the
     checkpoint, the renders and the sigma, so a re-run of training that changes none reads them back.
     """
-    from photoshape_flow.classify.reliability import reliability
-    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
-    from photoshape_flow.pipeline.training import load_material_classifier, training_data
-
     store = BlobStore(settings.blob_root)
     url = settings.resolved_database_url
     row, model = load_material_classifier(classifier_id, settings)
@@ -185,8 +181,6 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
 def _ranked_regions(model: Any, evidence: ClassifierEvidence, items: Sequence[Any],
                     framed: bool) -> tuple[list[float], list[bool]]:
     """(top posterior, right?) of every large-enough material region of `items`; unreadable renders skipped."""
-    from photoshape_flow.classify.dataset import frame_object, load_label_map, load_rgb
-
     confidence: list[float] = []
     correct: list[bool] = []
     known = set(model.materials)

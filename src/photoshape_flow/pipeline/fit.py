@@ -34,10 +34,8 @@ import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
-import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
@@ -45,27 +43,25 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
-from photoshape_flow.fit.scene import (
-    estimate_lighting,
-    render_candidates,
-    select_profiled,
-)
+from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.select import rank_candidates, scores_of
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.fit_calibration import ensure_calibration
 from photoshape_flow.pipeline.fit_context import (
     METHOD,
     FitContext,
     PairData,
     load_pair,
+    reference_pair,
     weights_report,
 )
 from photoshape_flow.pipeline.fit_refine import is_refined, refine_rows
-from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, IDENTITY_UV, resolve_classifier
+from photoshape_flow.pipeline.fit_steps import candidates_of, lighting_estimate, select_materials
+from photoshape_flow.pipeline.inference import IDENTITY_UV, resolve_classifier
+from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import STATUS_OK
 
 log = logging.getLogger(__name__)
 
@@ -111,59 +107,6 @@ class FitSummary:
                 "refinement_per_refined_pair": ratio("refinement", self.refined_pairs)}
 
 
-def candidates_of(ctx: FitContext, data: PairData) -> dict[int, list[Candidate]]:
-    """Each observed part's candidates (`fit.candidates`); a part with none keeps the ranking (absent here)."""
-    out = {}
-    for index, mask in sorted(data.scene.masks.items()):
-        ranked = [RankedRow(int(r.material_id), r.substance or ctx.material_substance.get(r.material_id, ""), r.score)
-                  for r in data.rows[index] if r.material_id is not None]
-        part_lab = np.median(data.scene.photo_lab[mask].reshape(-1, 3), axis=0)
-        candidates = part_candidates(ranked, ctx.cfg.top_k, ctx.material_substance, ctx.material_labs, part_lab,
-                                     ctx.untrained, ctx.cfg.prior_floor)
-        if candidates:
-            out[index] = candidates
-    return out
-
-
-def lighting_estimate(ctx: FitContext, data: PairData) -> dict[str, Any]:
-    """The best (envmap, rotation, exposure) for the pair's photo (`fit.scene.estimate_lighting`).
-
-    Round 1 lights the ranking's first materials; each further round (`lighting_rounds`) selects the
-    materials under the current estimate and lights those winners again, so a wrong first material
-    does not fix the lighting for good.
-    """
-    # envmap id -> its spec at a rotation; no envmap at all: the constant white sky (id 0)
-    envmaps = {e: partial(ctx.envmap_spec, e) for e in sorted(ctx.envmaps)} or {0: partial(ctx.envmap_spec, 0)}
-    chosen = data.rank1()
-    light: dict[str, Any] = {}
-    for round_ in range(max(1, ctx.cfg.lighting_rounds)):
-        if round_:
-            candidates = candidates_of(ctx, data)
-            measured, _ = select_materials(ctx, data, candidates, light)
-            chosen = {**chosen, **{i: rank_candidates(c, measured[i], ctx.prior_weight)[0].candidate.material_id
-                                   for i, c in candidates.items() if c}}
-        materials = [ctx.spec(chosen.get(p.index)) for p in data.scene.mesh.parts]
-        h, scale, loss, renders = estimate_lighting(ctx.frame, data.scene, materials, envmaps, ctx.cfg.rotations,
-                                                    ctx.weights, ctx.cfg.lighting_envmaps, ctx.cfg.erode)
-        light = {"envmap_id": h.envmap_id if h.envmap_id in ctx.envmaps else None, "rotation": round(h.rotation, 6),
-                 "exposure": round(scale, 6), "loss": round(loss, 6), "hypotheses": renders, "rounds": round_ + 1}
-    return light
-
-
-def _reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pair | None:
-    """The exemplar's pair whose rank-1 assignment lights it: best shape match with a ranking and an alignment."""
-    return session.execute(
-        sa.select(m.Pair)
-        .join(m.Shape, m.Shape.id == m.Pair.shape_id)
-        .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD,
-                                   m.Alignment.status == STATUS_OK))
-        .where(m.Pair.exemplar_id == exemplar_id, ~m.Pair.exclude, ~m.Shape.exclude,
-               m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == ctx.source_key)))
-        .order_by(sa.func.coalesce(m.Pair.exemplar_rank, 1 << 30), m.Pair.distance, m.Pair.id)
-        .limit(1)
-    ).scalar_one_or_none()
-
-
 def rows_hash(session: Session, pair_id: int, method_key: str) -> str | None:
     """The params_hash a pair's rows of `method_key` carry (None: no rows)."""
     return session.execute(
@@ -176,7 +119,7 @@ def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tupl
     """The exemplar's stored lighting when its key still holds, else a fresh estimate (stored); (record, computed)."""
     exemplar = session.get(m.Exemplar, data.pair.exemplar_id)
     assert exemplar is not None
-    reference = _reference_pair(session, ctx, exemplar.id) or data.pair
+    reference = reference_pair(session, ctx, exemplar.id) or data.pair
     stored = (exemplar.meta or {}).get(LIGHTING_KEY)
     for pair in dict.fromkeys((reference, data.pair)):  # the pair itself when its reference cannot be lit
         key = ctx.lighting_key(pair.id, data.source_hash if pair.id == data.pair.id
@@ -204,21 +147,6 @@ def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candid
     and whether its winners are refined (`pipeline.fit_refine`)."""
     return stable_hash({**ctx.params, "ranking": data.source_hash, "lighting": lighting_key, "refine": refine,
                         "candidates": {str(i): [c.material_id for c in cs] for i, cs in sorted(candidates.items())}})
-
-
-def select_materials(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
-                     light: dict[str, Any], envmap: Any = None) -> tuple[dict[int, dict[int, float | None]], float]:
-    """(part index -> {candidate material: distance}, the winners' exposure) under the exemplar's lighting
-    (`fit.scene.select_profiled`: each candidate at the exposure that best explains the photo with it);
-    `envmap` replaces the lighting's training envmap (the attribution experiment lights with the truth's)."""
-    if not candidates:
-        return {}, float(light.get("exposure", 1.0))
-    if envmap is None:
-        envmap = ctx.light_envmap(light)
-    renders = render_candidates(ctx.frame, data.scene, data.rank1(), candidates, ctx.spec, envmap)
-    distances, _, exposure = select_profiled(renders, data.scene, candidates, float(light.get("exposure", 1.0)),
-                                             ctx.weights, ctx.prior_weight, ctx.cfg.exposure_stops, ctx.cfg.erode)
-    return distances, exposure
 
 
 def fit_rows(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]],
@@ -258,8 +186,6 @@ def changed_parts(data: PairData, rows: Sequence[m.Assignment]) -> int:
 # -- the run ---------------------------------------------------------------------------------------------
 def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | None = None) -> list[int]:
     """Active, aligned pairs with rows of `source_key`, in id order."""
-    from photoshape_flow.pipeline.progress import active_pairs
-
     query = active_pairs().where(
         m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == source_key))
     ).order_by(m.Pair.id)
@@ -283,8 +209,6 @@ def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: 
         todo = fit_pairs_of(session, ctx.source_key, pair_ids)
     summary = FitSummary(ctx.method_key)
     if todo:
-        from photoshape_flow.pipeline.fit_calibration import ensure_calibration
-
         try:
             with summary.timed("calibration"):
                 ctx.calibration = ensure_calibration(ctx, settings, progress)

@@ -13,7 +13,7 @@ under val envmaps, true material of every part known from its spec) becomes a ca
 2. ranked by the classifier as inference ranks a part (material head, stored colour likelihood,
    and, since the substance network is not re-run on renders, the classifier's own substance head,
    as `pipeline.calibration.posterior_reliability` does): the prior of the candidates;
-3. lit, given candidates, rendered and measured by the stage's own functions (`pipeline.fit`:
+3. lit, given candidates, rendered and measured by the stage's own functions (`pipeline.fit_steps`:
    `lighting_estimate` over the training envmaps, not the render's own, `candidates_of`,
    `render_candidates`, `profiled_terms`) with the profile's hand-set weights, at the render's
    camera; each observed part whose true material is among its candidates is one `fit.calibrate.Case`.
@@ -29,6 +29,9 @@ calibrations; `run_fit` computes them when the key changed and the stage then ra
 workers that start `fit` at once may both compute them: the result is deterministic, so they write
 the same record. Reported with them: 2-fold cross-validated log-loss and top-1 (folds by render) of
 the hand-set cost, the hand-set cost with a fitted temperature, and the fitted cost.
+
+The sample of validation renders, the exemplars' size and the degradation (`validation_renders`,
+`exemplar_size`, `as_photo`) are `pipeline.validation_photos`'s, shared with the BatchNorm priors.
 """
 
 from __future__ import annotations
@@ -40,26 +43,30 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-import cv2
 import numpy as np
-import sqlalchemy as sa
 
 from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.devices import set_torch_threads
 from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit.scene import FitScene, FrameRenderer, exposure_grid, profiled_terms, render_candidates
 from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.pipeline.calibration import stored_color_prior
+from photoshape_flow.pipeline.fit_context import PairData
+from photoshape_flow.pipeline.fit_steps import candidates_of, lighting_estimate
+from photoshape_flow.pipeline.training import load_material_classifier, stored_bn_prior
+from photoshape_flow.pipeline.validation_photos import as_photo, exemplar_size, validation_renders
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.vocab import STATUS_OK
+from photoshape_flow.render import Camera
+from photoshape_flow.synth.spec import RenderSpec
 
 log = logging.getLogger(__name__)
 
 CODE_VERSION = "fit-calibration-3"  # 2: photos degraded at the exemplars' size (D45); 3: model chosen (D48)
 METRICS_KEY = "fit_calibration"  # classifier.metrics entry
-KINDS = ("training", "bootstrap")  # both rounds' val renders: val shapes under val envmaps
 # what a calibration may keep (`choices`): every weight and the temperature fitted, the hand-set weights
 # with their temperature fitted, or the hand-set weights as they are (temperature 1)
 MODELS = ("fitted", "hand_set_temperature", "hand_set")
@@ -94,45 +101,10 @@ def with_blur(ctx: Any, blur: float) -> Any:
     return other
 
 
-def validation_renders(session: sa.orm.Session, count: int, seed: int,
-                       kinds: Sequence[str] = KINDS) -> list[m.Rendering]:
-    """Up to `count` ok, non-excluded validation renders of `kinds`, a deterministic sample by seed and key."""
-    rows = session.execute(
-        sa.select(m.Rendering).where(m.Rendering.kind.in_(list(kinds)), m.Rendering.split == "val",
-                                     m.Rendering.status == STATUS_OK, m.Rendering.exclude.is_(False))
-    ).scalars().all()
-    rows = [r for r in rows if {"hdr", "part_ids"} <= set(r.blobs or {}) and r.shape_id is not None]
-    rows.sort(key=lambda r: (item_seed(seed, "fit-calibration", r.kind, r.key), r.id))
-    return rows[: max(0, count)]
-
-
-def exemplar_size(session: sa.orm.Session) -> int | None:
-    """The median side of the stored exemplar crops (None: no exemplar stored yet)."""
-    sizes = session.execute(sa.select(m.Exemplar.size).where(
-        m.Exemplar.status == STATUS_OK, ~m.Exemplar.exclude, m.Exemplar.size.is_not(None))).scalars().all()
-    return int(np.median(sizes)) if sizes else None
-
-
-def as_photo(hdr: np.ndarray, part_ids: np.ndarray, seed: int) -> np.ndarray:
-    """A validation render (white-composited linear HDR) degraded like a demo exemplar: 8-bit sRGB after JPEG."""
-    from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
-
-    covered = (np.asarray(part_ids) > 0).astype(np.float32)
-    premultiplied = np.asarray(hdr, np.float32)[..., :3] * covered[..., None]
-    params = sample_degradation(np.random.default_rng(seed))
-    image = degrade(premultiplied, covered, params)
-    decoded = cv2.imdecode(np.frombuffer(encode_jpeg(image, params["jpeg_quality"]), np.uint8), cv2.IMREAD_COLOR)
-    return np.ascontiguousarray(decoded[..., ::-1])
-
-
 class RenderRanker:
     """The classifier's ranking of a photo's regions, as inference ranks an observed part (see the module doc)."""
 
     def __init__(self, ctx: Any, settings: Settings):
-        from photoshape_flow.devices import set_torch_threads
-        from photoshape_flow.pipeline.calibration import stored_color_prior
-        from photoshape_flow.pipeline.training import load_material_classifier
-
         set_torch_threads(settings.torch_threads)
         row, self.model = load_material_classifier(ctx.classifier.id, settings)
         self.top_k = ctx.cfg.top_k
@@ -162,11 +134,6 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Set
 
     `photo_size`: the side the photo is degraded at (None: the render's own).
     """
-    from photoshape_flow.pipeline.fit import candidates_of, lighting_estimate
-    from photoshape_flow.pipeline.fit_context import PairData
-    from photoshape_flow.render import Camera
-    from photoshape_flow.synth.spec import RenderSpec
-
     spec = RenderSpec.from_dict(row.params)
     truth = spec.material_by_index()
     hdr, ids = ctx.store.load_image(row.blobs["hdr"]), ctx.store.load_image(row.blobs["part_ids"])
@@ -245,8 +212,6 @@ def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int, photo_s
     The classifier's BatchNorm prior changes how it ranks the cases (`RenderRanker`); it enters only
     when one is chosen, so calibrations of classifiers that read photos as trained keep their keys.
     """
-    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
-
     prior = stored_bn_prior(ctx.classifier)
     return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
                         "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed, "photo_size": photo_size,

@@ -21,10 +21,14 @@ from photoshape_flow.classify.feature_maps import FeatureMaps
 from photoshape_flow.db import models as m
 from photoshape_flow.fit.appearance import Weights
 from photoshape_flow.fit.scene import FitScene, FrameRenderer
+from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.method_keys import FIT, MethodKey
+from photoshape_flow.pipeline.calibration import material_lab
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD
+from photoshape_flow.pipeline.render_inputs import material_spec
 from photoshape_flow.profiles import FitConfig
+from photoshape_flow.render import Camera, EnvmapSpec, Renderer
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -62,8 +66,6 @@ class FitContext:
 
     def __init__(self, session: Session, store: BlobStore, classifier: m.Classifier, cfg: FitConfig,
                  renderer: Any = None):
-        from photoshape_flow.pipeline.calibration import material_lab
-
         self.store = store
         self.cfg = cfg
         self.classifier = classifier
@@ -94,8 +96,6 @@ class FitContext:
     def frame(self) -> FrameRenderer:
         if self._frame is None:
             if self._renderer is None:
-                from photoshape_flow.render import Renderer
-
                 self._renderer = Renderer(resolve=self.store.resolve)
             self._frame = FrameRenderer(self._renderer, self.cfg.size, self.cfg.spp)
         return self._frame
@@ -115,15 +115,11 @@ class FitContext:
         if material_id is None or material_id not in self.material_rows:
             return None
         if material_id not in self._specs:
-            from photoshape_flow.pipeline.render_inputs import material_spec
-
             self._specs[material_id] = material_spec(self.material_rows[material_id], self.store)
         return self._specs[material_id]
 
     def envmap_spec(self, envmap_id: int | None, rotation: float = 0.0) -> Any:
         """The render spec of a training envmap at a rotation (None: unknown id, the constant white sky)."""
-        from photoshape_flow.render import EnvmapSpec
-
         blob = self.envmaps.get(envmap_id) if envmap_id is not None else None
         return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
 
@@ -133,8 +129,6 @@ class FitContext:
         return self.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
 
     def mesh(self, shape: m.Shape) -> Any:
-        from photoshape_flow.geometry.mesh import ShapeMesh
-
         if shape.id not in self._meshes:
             if not shape.mesh_blob:
                 raise ValueError(f"shape {shape.id} has no mesh")
@@ -195,8 +189,6 @@ def weights_report(ctx: FitContext) -> dict[str, Any]:
 
 def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
     """A pair's photo, aligned regions and classifier rows at the fit resolution; a one-line error when incomplete."""
-    from photoshape_flow.render import Camera
-
     shape, exemplar = session.get(m.Shape, pair.shape_id), session.get(m.Exemplar, pair.exemplar_id)
     if shape is None or exemplar is None or not exemplar.image_blob:
         raise ValueError(f"pair {pair.id}: shape or exemplar image missing")
@@ -227,3 +219,17 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
     scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.blur,
                                 foreground=foreground, features=ctx.features)
     return PairData(pair, scene, rows, source_hash)
+
+
+def reference_pair(session: Session, ctx: FitContext, exemplar_id: int) -> m.Pair | None:
+    """The exemplar's pair whose rank-1 assignment lights it: best shape match with a ranking and an alignment."""
+    return session.execute(
+        sa.select(m.Pair)
+        .join(m.Shape, m.Shape.id == m.Pair.shape_id)
+        .join(m.Alignment, sa.and_(m.Alignment.pair_id == m.Pair.id, m.Alignment.method == ALIGNMENT_METHOD,
+                                   m.Alignment.status == STATUS_OK))
+        .where(m.Pair.exemplar_id == exemplar_id, ~m.Pair.exclude, ~m.Shape.exclude,
+               m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == ctx.source_key)))
+        .order_by(sa.func.coalesce(m.Pair.exemplar_rank, 1 << 30), m.Pair.distance, m.Pair.id)
+        .limit(1)
+    ).scalar_one_or_none()

@@ -2,7 +2,7 @@
 
 Only the pairs that are used are refined (issue 26: refinement costs seconds per pair): those
 publish renders (rank up to `FitConfig.refine_max_rank` among the shape's exemplars) and each
-exemplar's best pair (the one that lights it, `pipeline.fit._reference_pair`); every other pair
+exemplar's best pair (the one that lights it, `pipeline.fit_context.reference_pair`); every other pair
 keeps the selection. The refinement is written on the rank-1 `fit` row of each refined part
 (``assignment.refinement``), and whether a pair is refined enters its params_hash
 (`pipeline.fit.pair_hash`), so a pair that becomes used is fitted again.
@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session
 from photoshape_flow.db import models as m
 from photoshape_flow.fit.refine import RefineSettings, refine_parts
 from photoshape_flow.fit.scene import FrameRenderer
+from photoshape_flow.pipeline.fit_context import reference_pair
 from photoshape_flow.profiles import FitConfig
 
 
@@ -27,13 +28,11 @@ def refine_settings(cfg: FitConfig) -> RefineSettings:
 
 def is_refined(session: Session, ctx: Any, pair: m.Pair) -> bool:
     """Whether the fit refines this pair's winners (see the module docstring)."""
-    from photoshape_flow.pipeline.fit import _reference_pair
-
     if not ctx.cfg.refine:
         return False
     if pair.rank <= ctx.cfg.refine_max_rank:
         return True
-    reference = _reference_pair(session, ctx, pair.exemplar_id)
+    reference = reference_pair(session, ctx, pair.exemplar_id)
     return reference is not None and reference.id == pair.id
 
 

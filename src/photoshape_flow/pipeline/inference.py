@@ -35,11 +35,13 @@ from photoshape_flow.classify.assignment import (
     substance_vector,
 )
 from photoshape_flow.classify.evidence import ClassifierEvidence
+from photoshape_flow.classify.infer import load_classifier
 from photoshape_flow.classify.substance_calibration import temper
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import claims
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.devices import set_torch_threads
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.method_keys import MethodKey
@@ -49,6 +51,7 @@ from photoshape_flow.pipeline.calibration import (
     stored_temperature,
     substance_networks,
 )
+from photoshape_flow.pipeline.training import stored_bn_prior
 from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
@@ -166,12 +169,7 @@ class _Context:
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
-            from photoshape_flow.classify.infer import load_classifier
-            from photoshape_flow.devices import set_torch_threads
-
             set_torch_threads(settings.torch_threads)
-            from photoshape_flow.pipeline.bn_prior import stored_bn_prior
-
             self.bn_prior = stored_bn_prior(classifier)
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device,
                                          bn_prior=self.bn_prior)

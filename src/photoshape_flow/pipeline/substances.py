@@ -33,7 +33,18 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
+from photoshape_flow.classify.infer import load_classifier
+from photoshape_flow.classify.substance_calibration import fit_temperature, nll, part_calibration_set
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig, get_config
+from photoshape_flow.classify.substance_parts import part_substances
+from photoshape_flow.classify.substance_recognition import recogniser_config, substance_map
+from photoshape_flow.classify.substance_train import (
+    SubstanceData,
+    checkpoint_from_bytes,
+    checkpoint_to_bytes,
+    load_model,
+    train_substance_net,
+)
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -41,6 +52,8 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.bn_prior import choose_substance_bn_prior
+from photoshape_flow.pipeline.training import load_material_classifier, run_training, stored_bn_prior
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.progress_sink import Progress, counted, no_progress
 from photoshape_flow.store import BlobStore
@@ -58,8 +71,6 @@ RULE_VERSION = "part-substances-v2"  # v2: flip-averaged substance probabilities
 
 def load_bootstrap_data(session: sa.orm.Session, store: BlobStore) -> tuple[Any, Any, str]:
     """(train, val, data_hash): ok bootstrap renders as SubstanceData, split by their `split`."""
-    from photoshape_flow.classify.substance_train import SubstanceData
-
     rows = session.execute(
         sa.select(m.Rendering.key, m.Rendering.split, m.Rendering.blobs, m.Rendering.params_hash)
         .where(m.Rendering.kind == "bootstrap", m.Rendering.status == STATUS_OK, ~m.Rendering.exclude)
@@ -102,14 +113,6 @@ def train_or_resume(
     **overrides: Any,
 ) -> tuple[int, Any, dict[str, Any]]:
     """Train the substance network (or resume / reuse it); returns (classifier_id, model, info)."""
-
-    from photoshape_flow.classify.substance_train import (
-        checkpoint_from_bytes,
-        checkpoint_to_bytes,
-        load_model,
-        train_substance_net,
-    )
-
     set_torch_threads(settings.torch_threads)
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
@@ -189,9 +192,6 @@ def train_or_resume(
 def train_recogniser(settings: Settings, config: SubstanceTrainConfig, *,
                      progress: Progress | None = None) -> tuple[int, Any, dict[str, Any]]:
     """The part recogniser on the bootstrap round (trained, resumed or reused by the training code)."""
-    from photoshape_flow.classify.substance_recognition import recogniser_config
-    from photoshape_flow.pipeline.training import load_material_classifier, run_training
-
     classifier_config = recogniser_config(config)
     classifier_id = run_training(classifier_config, settings=settings, kinds=("bootstrap",), progress=progress,
                                  network_kind="substance")
@@ -204,9 +204,6 @@ def train_recogniser(settings: Settings, config: SubstanceTrainConfig, *,
 
 def load_substance_network(row: Any, store: BlobStore, device: str) -> Any:
     """The network of a substance row: the segmentation net, or the part recogniser (`MaterialClassifier`)."""
-    from photoshape_flow.classify.infer import load_classifier
-    from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
-
     data = store.read_bytes(row.checkpoint_blob)
     if (row.config or {}).get("arch", "unet") != "unet":
         return load_classifier(data, device=device)
@@ -247,10 +244,6 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
     before and after, and a key of the renders used): refit only when those renders change, and
     a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
     """
-    from photoshape_flow.classify.substance_calibration import fit_temperature, nll, part_calibration_set
-    from photoshape_flow.classify.substance_recognition import substance_map
-    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
-
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
     with session_scope(url) as session:
@@ -311,9 +304,6 @@ def assign_part_substances(
     `bn_prior`: the network reads each photo with its BatchNorm statistics mixed with the photo's
     (`classify.bn_adapt`, chosen by `pipeline.bn_prior`; None: as trained).
     """
-    from photoshape_flow.classify.substance_parts import part_substances
-    from photoshape_flow.classify.substance_recognition import substance_map
-
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
     summary = {"pairs": 0, "updated": 0, "skipped": 0, "failed": 0, "parts": 0, "unobserved": 0, "errors": []}
@@ -434,8 +424,6 @@ def train_and_assign(settings: Settings, size: int, train_config: str | Substanc
                      train_overrides: dict[str, Any] | None = None,
                      progress: Progress | None = None) -> dict[str, Any]:
     """The network on the bootstrap renders that exist (trained or resumed), then every part's substance."""
-    from photoshape_flow.pipeline.bn_prior import choose_substance_bn_prior
-
     classifier_id, model, info = train_or_resume(settings, train_config, progress=progress, **(train_overrides or {}))
     predict_size = _config_size(settings, classifier_id) or size
     choice = choose_substance_bn_prior(settings, classifier_id, model, predict_size)

@@ -33,8 +33,14 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from photoshape_flow.classify import checkpoint as ckpt
+from photoshape_flow.classify.backbone import backbone_record
 from photoshape_flow.classify.configs import ClassifierConfig, config_hash, get_config
-from photoshape_flow.classify.dataset import RenderItem
+from photoshape_flow.classify.dataset import RegionDataset, RenderItem, find_regions
+from photoshape_flow.classify.infer import load_classifier
+from photoshape_flow.classify.networks import build_network
+from photoshape_flow.classify.resnet import grow_material_head
+from photoshape_flow.classify.train import history_entry, select_best, train_classifier
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db.base import utcnow
 from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
@@ -140,6 +146,13 @@ def newest_material_classifier(session: Session) -> Classifier | None:
     ).first()
 
 
+def stored_bn_prior(classifier: Classifier | None) -> float | None:
+    """The chosen prior on a network's row (None: not chosen, or no adaptation won)."""
+    choice = (classifier.metrics or {}).get("bn_prior_choice") if classifier is not None else None
+    value = choice.get("bn_prior") if isinstance(choice, dict) else None
+    return None if value is None else float(value)
+
+
 def load_material_classifier(
     classifier_id: int | None = None, settings: Settings | None = None, device: str | None = None,
     kind: str = "material",
@@ -149,9 +162,6 @@ def load_material_classifier(
     The model reads photos with the BatchNorm prior chosen for it (`pipeline.bn_prior`), if any.
     ``kind="substance"`` loads the substances stage's part recogniser (same network family) by id.
     """
-    from photoshape_flow.classify.infer import load_classifier
-    from photoshape_flow.pipeline.bn_prior import stored_bn_prior
-
     settings = settings or get_settings()
     with session_scope(settings.resolved_database_url) as session:
         if classifier_id is None:
@@ -195,8 +205,6 @@ def _parent_candidate(
 
 def _metrics(history: list[dict[str, Any]], selected_epoch: int | None = None, **extra: Any) -> dict[str, Any]:
     """Table 4 metrics of the selected epoch (default: the last), plus totals over the whole run."""
-    from photoshape_flow.classify.train import history_entry
-
     last = history_entry(history, selected_epoch)
     metrics: dict[str, Any] = {key: last.get(key) for key in METRIC_KEYS}
     metrics["selected_epoch"] = last.get("epoch")
@@ -239,13 +247,6 @@ def run_training(
     never taken for the material classifier, and it never fine-tunes from one.
     """
     import torch
-
-    from photoshape_flow.classify import checkpoint as ckpt
-    from photoshape_flow.classify.backbone import backbone_record
-    from photoshape_flow.classify.dataset import RegionDataset, find_regions
-    from photoshape_flow.classify.networks import build_network
-    from photoshape_flow.classify.resnet import grow_material_head
-    from photoshape_flow.classify.train import select_best, train_classifier
 
     settings = settings or get_settings()
     cfg = config if isinstance(config, ClassifierConfig) else get_config(config, **(overrides or {}))
