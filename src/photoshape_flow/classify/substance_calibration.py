@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.vocab import SUBSTANCES
 
 log = logging.getLogger(__name__)
@@ -117,8 +118,6 @@ def part_calibration_set(
     `part_substances` probabilities and its true substance, the majority substance label under it
     (labels are SUBSTANCE_LABELS indices: 0 background, 1.. substances).
     """
-    from photoshape_flow.classify.substance_parts import part_substances
-
     rows: list[list[float]] = []
     truth: list[int] = []
     for probs, part_ids, substance_ids in predictions:

@@ -36,6 +36,7 @@ import torch
 import torch.nn.functional as F
 
 from photoshape_flow.classify.bn_adapt import adapted_batchnorm
+from photoshape_flow.classify.dataset import frame_object
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.vocab import SUBSTANCE_LABELS
@@ -63,8 +64,6 @@ class SubstanceData:
 
     def framed(self) -> SubstanceData:
         """Each image and label map cropped to the square around its object (`frame_object`)."""
-        from photoshape_flow.classify.dataset import frame_object
-
         pairs = [frame_object(image, label) for image, label in zip(self.images, self.labels, strict=True)]
         return SubstanceData([p[0] for p in pairs], [p[1] for p in pairs], list(self.keys))
 

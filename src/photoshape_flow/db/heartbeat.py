@@ -14,6 +14,7 @@ import threading
 from types import TracebackType
 
 from photoshape_flow.db import claims
+from photoshape_flow.db.session import session_scope
 
 log = logging.getLogger(__name__)
 
@@ -43,8 +44,6 @@ class Heartbeat:
 
     def beat(self) -> int:
         """One renewal now; returns how many claims were renewed."""
-        from photoshape_flow.db.session import session_scope
-
         with session_scope(self.database_url) as session:
             renewed = claims.renew(session, self.lease_seconds, worker=self._worker)
         self.beats += 1

@@ -19,6 +19,8 @@ import numpy as np
 
 from photoshape_flow.demo.furniture.model import SUBSTANCE_PRIOR, Furniture
 from photoshape_flow.demo.materials import MaterialRecipe
+from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.specs import linear_to_srgb
 
 ELEVATION_RANGE = (-math.pi / 16, math.pi / 4)
 FOV_RANGE = (50.0, 60.0)
@@ -47,8 +49,6 @@ class ExemplarPlan:
 
 def framing_distance(vertices: np.ndarray, azimuth: float, elevation: float, fov: float, fill: float) -> float:
     """The camera distance at which the projected shape spans `fill` of the half-frame (max |x|, |y|)."""
-    from photoshape_flow.render.camera import Camera
-
     pts = np.asarray(vertices, np.float64)
     lo, hi = 0.6, 20.0
 
@@ -131,8 +131,6 @@ def sample_degradation(rng: np.random.Generator) -> dict[str, Any]:
 
 def degrade(premultiplied: np.ndarray, alpha: np.ndarray, params: dict[str, Any]) -> np.ndarray:
     """An 8-bit RGB 'photo' from a premultiplied linear render and its coverage."""
-    from photoshape_flow.render.specs import linear_to_srgb
-
     gains = np.asarray(params["white_balance"], np.float64) * float(params["exposure"])
     a = np.clip(alpha, 0.0, 1.0)[..., None].astype(np.float64)
     background = float(params["background"]) * np.asarray(params["white_balance"], np.float64)

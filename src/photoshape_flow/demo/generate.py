@@ -47,6 +47,9 @@ from photoshape_flow.demo.obj import mtl_text, obj_text
 from photoshape_flow.demo.seeding import child_rng
 from photoshape_flow.demo.writing import write_bytes, write_text
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.render import Renderer
+from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec
 from photoshape_flow.vocab import SUBSTANCES
 
 log = logging.getLogger(__name__)
@@ -234,8 +237,6 @@ def plan_exemplars(
 
 
 def _material_spec(folder: Path, recipe: MaterialRecipe):
-    from photoshape_flow.render.specs import MaterialSpec
-
     maps = {ch: folder / f"{ch}.png" for ch in ("albedo", "roughness", "metallic", "normal")}
     return MaterialSpec(name=recipe.name, substance=recipe.substance, maps=maps, scale=recipe.scale)
 
@@ -249,9 +250,6 @@ def render_exemplar(
     envmap_path: Path,
 ) -> tuple[bytes, np.ndarray]:
     """(JPEG bytes, part-index mask) of one planned exemplar."""
-    from photoshape_flow.render.camera import Camera
-    from photoshape_flow.render.specs import EnvmapSpec
-
     shape = furniture.to_shape_mesh()
     camera = Camera.from_dict(plan.camera)
     materials = [
@@ -396,8 +394,6 @@ def generate_demo(
             visible = list(old["visible_parts"])
         else:
             if renderer is None:
-                from photoshape_flow.render import Renderer
-
                 renderer = Renderer()
             jpeg, mask = render_exemplar(
                 renderer, furniture, plan, material_dirs, recipe_by_name, held_paths[plan.envmap["name"]]

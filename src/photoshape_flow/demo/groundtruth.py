@@ -45,6 +45,7 @@ from photoshape_flow.evaluation.groundtruth import (
     read_part_mask,
     source_keys,
 )
+from photoshape_flow.render.camera import Camera
 
 GROUNDTRUTH_FORMAT, GROUNDTRUTH_VERSION = FORMAT, VERSION
 
@@ -56,9 +57,7 @@ class CameraTruth:
     distance: float
     fov: float
 
-    def to_camera(self):  # -> photoshape_flow.render.Camera (imported lazily: no Mitsuba here)
-        from photoshape_flow.render.camera import Camera
-
+    def to_camera(self) -> Camera:
         return Camera(self.azimuth, self.elevation, self.distance, self.fov)
 
 

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from photoshape_flow.export.text import one_line
-from photoshape_flow.render.specs import uv_matrix
+from photoshape_flow.render.specs import UVTransform, uv_matrix
 
 FORMAT = "photoshape_flow.assignment/1"
 
@@ -61,8 +61,6 @@ def assignment_document(
     extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The sidecar as a JSON-ready dict (see the module docstring)."""
-    from photoshape_flow.render.specs import UVTransform
-
     part_rows = []
     for p in parts:
         jitter = None

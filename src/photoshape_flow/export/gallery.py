@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from photoshape_flow.export.bundle import format_files
 from photoshape_flow.export.formats import EXPORTERS, SIDECAR, SIDECAR_PATH
 from photoshape_flow.export.templating import render
 from photoshape_flow.faults import fault_point
@@ -162,8 +163,6 @@ class _Assets:
 def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
     """Copy a single-file download, or zip what a multi-file format needs (`bundle.format_files`);
     returns the site path."""
-    from photoshape_flow.export.bundle import format_files
-
     source = Path(source)
     folder = root / "downloads" / slug
     folder.mkdir(parents=True, exist_ok=True)

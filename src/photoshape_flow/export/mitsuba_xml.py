@@ -40,6 +40,9 @@ from typing import Any
 
 from photoshape_flow.export.pbr import ResolveRef, content_file_name
 from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.pool import envmap_data
+from photoshape_flow.render.runtime import ensure_mitsuba
+from photoshape_flow.render.scene import SceneOptions, build_scene, material_bsdf, part_key
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, material_from_builtin
 
 
@@ -94,8 +97,6 @@ def rendered_envmap(envmap: EnvmapSpec | None) -> dict[str, Any]:
     scale and rotation; radiance 1 everywhere when `envmap` is None."""
     import math
 
-    from photoshape_flow.render.pool import envmap_data
-    from photoshape_flow.render.runtime import ensure_mitsuba
 
     mi = ensure_mitsuba()
     data = envmap_data(envmap)[:, 1:-1]  # without the plugin's wrap-around columns: it adds them again
@@ -112,8 +113,6 @@ def scene_to_xml(scene: dict[str, Any], bsdfs: dict[str, dict[str, Any]], path: 
 
     `bsdfs`: part key -> the part's BSDF dict (the meshes in `scene` hold instantiated BSDFs).
     """
-    from photoshape_flow.render.runtime import ensure_mitsuba
-
     mi = ensure_mitsuba()
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -158,8 +157,6 @@ def write_mitsuba_xml(
     `max_texture_size` defaults to the renderer's (`SceneOptions`), so the XML holds the texels
     that the PhotoShape renders used; `seed` is the sampler's base seed (see the module docstring).
     """
-    from photoshape_flow.render.scene import SceneOptions, build_scene, material_bsdf, part_key
-
     max_texture_size = max_texture_size or SceneOptions().max_texture_size
     specs = concrete_materials(shape, materials, resolve_ref)
     options = SceneOptions(

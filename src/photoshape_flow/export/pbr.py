@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from photoshape_flow.render.specs import material_from_builtin, srgb_to_linear
+from photoshape_flow.render.specs import linear_to_srgb, material_from_builtin, srgb_to_linear
 
 ResolveRef = Callable[[str], Path]
 
@@ -227,8 +227,6 @@ def _decode(image: EncodedImage) -> np.ndarray:
 
 def _tinted_srgb(srgb: np.ndarray, tint: np.ndarray) -> np.ndarray:
     """An sRGB 8-bit image times a linear tint, clipped, back in sRGB 8-bit (as the renderer tints)."""
-    from photoshape_flow.render.specs import linear_to_srgb
-
     linear = srgb_to_linear(srgb.astype(np.float64) / 255.0) * tint.reshape(1, 1, 3)
     return np.clip(np.rint(linear_to_srgb(np.clip(linear, 0.0, 1.0)) * 255.0), 0, 255).astype(np.uint8)
 

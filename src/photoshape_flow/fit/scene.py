@@ -24,6 +24,7 @@ from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.deep_texture import deep_stats
 from photoshape_flow.fit.select import rank_candidates, render_slots
 from photoshape_flow.imaging.squares import crop_square, square_box
+from photoshape_flow.render.gradients import GradientScene
 
 MIN_BACKGROUND = 12  # background pixels needed to measure the photo's background colour
 OVERSAMPLE = 1.25  # render larger than the frame, then crop the silhouette's square (as fine alignment)
@@ -67,8 +68,6 @@ class FrameRenderer:
                        max_depth: int = 3) -> Any:
         """The renderer's scene at the frame's camera with differentiable tints and roughness
         (`render.gradients.GradientScene`, a context manager), uncropped at `render_size`."""
-        from photoshape_flow.render.gradients import GradientScene
-
         zoomed = self._frame(mesh, camera)[0]
         return GradientScene(self.renderer, mesh, materials, zoomed, envmap, self.render_size, max_depth)
 

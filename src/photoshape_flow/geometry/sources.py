@@ -27,10 +27,10 @@ from typing import Any
 from urllib.parse import unquote
 
 from photoshape_flow.export.text import hidden_character
-from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip
+from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip, normalise_member
 from photoshape_flow.geometry.obj import referenced_files, resolve_inside
 from photoshape_flow.geometry.raw import BadShapeError
-from photoshape_flow.geometry.sh3f import read_catalog
+from photoshape_flow.geometry.sh3f import model_files, read_catalog
 from photoshape_flow.inputs import Fingerprints, fingerprint, walk_inputs
 from photoshape_flow.sidecar import parse_document
 
@@ -314,7 +314,6 @@ def materialize(item: ShapeItem, limits: ArchiveLimits | None = None) -> Iterato
         sha = _file_hash(paths, model.parent)
         yield Materialized(model=model, root=root, sha256=sha, files=[str(p) for p in paths], fingerprints=before)
         return
-    from photoshape_flow.geometry.sh3f import model_files
 
     assert item.member is not None
     with SafeZip(item.archive, limits) as archive, tempfile.TemporaryDirectory(prefix="photoshape-sh3f-") as tmp:
@@ -327,7 +326,6 @@ def materialize(item: ShapeItem, limits: ArchiveLimits | None = None) -> Iterato
             archive.extract(member, tmp_root, data=data)
         info = archive.find(item.member)
         assert info is not None
-        from photoshape_flow.geometry.archive import normalise_member
 
         model = tmp_root / normalise_member(info.filename)
         yield Materialized(model=model, root=tmp_root, sha256=content_hash(entries), files=members)

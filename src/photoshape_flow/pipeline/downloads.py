@@ -17,6 +17,7 @@ from typing import Any
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.export.bundle import export_photoshape
 from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
 from photoshape_flow.pipeline.photoshapes import (
     EXEMPLAR_VIEW,
@@ -88,8 +89,6 @@ def export_candidates(
     candidate is reported and the others go on. `size` / `spp` of the scene formats: None takes the
     published exemplar-view render's, so the XML reproduces it (`DEFAULT_FILM` when unpublished).
     """
-    from photoshape_flow.export.bundle import export_photoshape
-
     settings = settings or get_settings()
     formats = parse_formats(list(formats))
     store = BlobStore(settings.blob_root)

@@ -45,8 +45,11 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.evaluation.bootstrap import OBSERVATIONS, Observations, difference_interval, mean_interval
 from photoshape_flow.evaluation.groundtruth import ItemRef, TruthEntry, read_groundtruth_file
 from photoshape_flow.method_keys import CLASSIFIER, classifier_id_of, method_of
+from photoshape_flow.pipeline.coarse_alignment import evaluate_coarse_alignment
+from photoshape_flow.pipeline.fine_alignment import evaluate_fine_alignment
 from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
 from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
+from photoshape_flow.pipeline.relighting_eval import RelightingScores
 from photoshape_flow.pipeline.rerender_eval import RerenderScores, rendered_variants
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.store import BlobStore
@@ -250,8 +253,6 @@ def inference_observations(
         if a.refinement:
             refining.add(a.method_key)
     scores: Scores = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
-    from photoshape_flow.pipeline.relighting_eval import RelightingScores
-
     relight = RelightingScores(store, relight_size, rerender_spp, relight_max_pairs)
     rerender = RerenderScores(store, rerender_size, rerender_spp, rerender_max_pairs)
     truth_cache: dict[int, dict[int, tuple[str, str]]] = {}
@@ -373,12 +374,8 @@ def run_evaluation(
                              f" ({len(matched.problems)} entries left out)")
         truths, records = matched.truths, matched.by_source_id()
         if "coarse-alignment" in stages:
-            from photoshape_flow.pipeline.coarse_alignment import evaluate_coarse_alignment
-
             metrics += _dict_metrics("coarse-alignment", "hog", evaluate_coarse_alignment(session, records))
         if "fine-alignment" in stages:
-            from photoshape_flow.pipeline.fine_alignment import evaluate_fine_alignment
-
             with_part_masks = {k: e for k, e in records.items() if e.part_names}
             metrics += _dict_metrics("fine-alignment", "flow-crf",
                                      evaluate_fine_alignment(session, with_part_masks, settings=settings))

@@ -34,9 +34,12 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.demo.groundtruth import exemplar_records, record_field, record_for_source, record_mask
 from photoshape_flow.evaluation.bootstrap import OBSERVATIONS
+from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
+from photoshape_flow.render import Renderer
+from photoshape_flow.render.camera import Camera
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -96,8 +99,6 @@ class _MeshCache:
         self.items: OrderedDict[str, Any] = OrderedDict()
 
     def get(self, ref: str) -> Any:
-        from photoshape_flow.geometry.mesh import ShapeMesh
-
         if ref in self.items:
             self.items.move_to_end(ref)
             return self.items[ref]
@@ -112,8 +113,6 @@ def _align_item(
     item: Mapping[str, Any], params: FineParams, store: BlobStore, renderer: Any, meshes: _MeshCache
 ) -> dict[str, Any]:
     """Compute and store one pair's maps; returns the Alignment columns (raises on bad input)."""
-    from photoshape_flow.render.camera import Camera
-
     for column in ("mesh_blob", "image_blob", "mask_blob"):
         if not item[column]:
             raise ValueError(f"pair {item['pair_id']}: {column} is missing")
@@ -195,8 +194,6 @@ def run_fine_alignment(
         "up_to_date": len(candidates) - len(pending), "aligned": 0, "failed": 0, "failures": [],
     }
     if pending and renderer is None:
-        from photoshape_flow.render import Renderer
-
         renderer = Renderer()
     meshes = _MeshCache(store)
     ious: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}

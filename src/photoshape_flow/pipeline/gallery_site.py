@@ -16,6 +16,8 @@ from sqlalchemy.orm import Session
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.export.contact_sheet import contact_sheet
+from photoshape_flow.export.gallery import GalleryEntry, GalleryMaterial, GalleryPart, write_gallery
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.grading import current_grades
 from photoshape_flow.pipeline.photoshapes import UNREFINED_VIEW, candidate_method_keys, provenance
@@ -27,8 +29,6 @@ from photoshape_flow.vocab import STATUS_OK
 def gallery_data(session: Session, store: BlobStore, method: str | None = None,
                  settings: Settings | None = None, progress: Progress | None = None) -> tuple[list[Any], list[Any]]:
     """`GalleryEntry` per candidate of `method` and `GalleryMaterial` per material they use."""
-    from photoshape_flow.export.gallery import GalleryEntry, GalleryMaterial, GalleryPart
-
     settings = settings or get_settings()
 
     def blob_path(ref: str | None) -> Path | None:
@@ -116,8 +116,6 @@ class GallerySite(NamedTuple):
 def write_gallery_site(out_dir: str | Path, method: str | None = None,
                        settings: Settings | None = None, progress: Progress | None = None) -> GallerySite:
     """Gather the candidates from the database and write the static gallery."""
-    from photoshape_flow.export.gallery import write_gallery
-
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
     with session_scope(settings.resolved_database_url) as session:
@@ -130,8 +128,6 @@ def write_gallery_site(out_dir: str | Path, method: str | None = None,
 def write_contact_sheet(out: str | Path, method: str | None = None, settings: Settings | None = None,
                         **kwargs: Any) -> Path:
     """The best candidates of `method` as one PNG (`export.contact_sheet`); returns its path."""
-    from photoshape_flow.export.contact_sheet import contact_sheet
-
     settings = settings or get_settings()
     store = BlobStore(settings.blob_root)
     with session_scope(settings.resolved_database_url) as session:

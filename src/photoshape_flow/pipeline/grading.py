@@ -14,8 +14,10 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
+from photoshape_flow.db.upsert import upsert
 from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
+from photoshape_flow.vocab import GRADES
 
 
 def graded_photoshape(session: Session, pair_id: int, method: str | None = None) -> tuple[str, str]:
@@ -40,9 +42,6 @@ def record_grade(session: Session, pair_id: int, label: str, note: str | None = 
 
     Raises ValueError (one line) for an unknown label or pair, or a pair without that PhotoShape.
     """
-    from photoshape_flow.db.upsert import upsert
-    from photoshape_flow.vocab import GRADES
-
     if label not in GRADES:
         raise ValueError(f"unknown grade {label!r}; valid grades: {', '.join(GRADES)}")
     method_key, set_key = graded_photoshape(session, pair_id, method)

@@ -17,6 +17,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.base import utcnow
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.demo import newest_groundtruth
 from photoshape_flow.evaluation.groundtruth import GroundTruthFile
 
 NO_GROUNDTRUTH = ("no ground truth given, none registered and no demo under the data root: pass one "
@@ -42,8 +43,6 @@ def registered_groundtruth(session: Session) -> Path | None:
 
 def default_groundtruth(session: Session, data_root: Path) -> Path | None:
     """The registered file, else the newest demo's ground truth (None: nothing to score against)."""
-    from photoshape_flow.demo import newest_groundtruth
-
     return registered_groundtruth(session) or newest_groundtruth(data_root)
 
 

@@ -27,7 +27,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.export.text import one_line as text_line
 from photoshape_flow.geometry.archive import ArchiveLimits
 from photoshape_flow.progress_sink import Progress as ProgressSink
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, sha256_file
 from photoshape_flow.vocab import STATUS_OK
 
 logger = logging.getLogger(__name__)
@@ -162,8 +162,6 @@ class IngestLimits:
 
 def files_hash(paths: Iterable[Path], base: Path | None = None) -> str:
     """sha256 over (relative name, sha256 of bytes) of several files, in the given order."""
-    from photoshape_flow.store import sha256_file
-
     digest = hashlib.sha256()
     for path in paths:
         name = path.name

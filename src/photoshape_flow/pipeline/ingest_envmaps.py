@@ -37,6 +37,7 @@ from photoshape_flow.pipeline.ingest_common import (
     resolve_settings,
     store_for,
 )
+from photoshape_flow.pipeline.ingest_materials import materials_without_preview, render_material_previews
 from photoshape_flow.store import BlobStore, sha256_file
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED
 
@@ -211,7 +212,6 @@ def ingest_envmaps(
     logger.info("envmaps: %d added, %d present, %d replaced, %d rejected", len(summary.added),
                 len(summary.present), len(summary.replaced), len(summary.rejected))
     if summary.added or summary.replaced:  # materials ingested before any envmap get their previews now
-        from photoshape_flow.pipeline.ingest_materials import materials_without_preview, render_material_previews
 
         missing = materials_without_preview(url)
         if missing:

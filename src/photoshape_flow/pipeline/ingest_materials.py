@@ -28,6 +28,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.events import EventSink
 from photoshape_flow.export.text import one_line as text_line
+from photoshape_flow.geometry.primitives import uv_sphere
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.svbrdf import (
     SIDECARS,
@@ -48,6 +49,7 @@ from photoshape_flow.pipeline.ingest_common import (
     resolve_settings,
     store_for,
 )
+from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec, Renderer
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED
 
 logger = logging.getLogger(__name__)
@@ -275,13 +277,6 @@ def render_material_previews(
     ids = list(material_ids)
     if not ids:
         return summary
-    try:
-        from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec, Renderer
-    except Exception as exc:  # renderer not importable
-        reason = f"renderer unavailable ({one_line(exc)})"
-        logger.info("material previews skipped: %s", reason)
-        summary.skipped.append(("previews", reason))
-        return summary
     url = settings.resolved_database_url
     store = store_for(settings)
     with session_scope(url) as session:
@@ -303,8 +298,6 @@ def render_material_previews(
         logger.info("material previews skipped: %s", reason)
         summary.skipped.append(("previews", reason))
         return summary
-    from photoshape_flow.geometry.primitives import uv_sphere
-
     sphere = uv_sphere()
     camera = Camera(azimuth=0.0, elevation=0.35, distance=2.2, fov=30.0)
     env = EnvmapSpec(path=store.resolve(envmap))

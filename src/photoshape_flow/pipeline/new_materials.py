@@ -27,6 +27,8 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
 from photoshape_flow.method_keys import MethodKey
+from photoshape_flow.pipeline.fit import fit_pairs_of
+from photoshape_flow.pipeline.inference import resolve_classifier
 from photoshape_flow.pipeline.training import material_set, newest_material_classifier
 from photoshape_flow.profiles import resolve_profile
 
@@ -86,9 +88,6 @@ def affected_pairs(session: Session) -> tuple[str | None, list[int]]:
     part (`fit.candidates`), so these are exactly the pairs whose candidate set the new materials
     join; a pair with no observed part keeps the classifier's ranking and is left alone.
     """
-    from photoshape_flow.pipeline.fit import fit_pairs_of
-    from photoshape_flow.pipeline.inference import resolve_classifier
-
     classifier = resolve_classifier(session)
     if classifier is None:
         return None, []

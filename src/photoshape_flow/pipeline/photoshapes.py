@@ -27,10 +27,15 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from photoshape_flow.align.partmap import zoom_to_fit
 from photoshape_flow.db import models as m
 from photoshape_flow.export.assignment import PartAssignment, Provenance, assignment_document
+from photoshape_flow.geometry.mesh import ShapeMesh
+from photoshape_flow.hashing import stable_hash
 from photoshape_flow.method_keys import is_method_name
+from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
+from photoshape_flow.render import Camera, Refinement, UVTransform
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -92,8 +97,6 @@ def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]], *,
     than by the pair alone. Pairs without rank-1 rows are absent. `with_refinement=False` is for a
     migration older than the `assignment.refinement` column (no row was refined then).
     """
-    from photoshape_flow.hashing import stable_hash
-
     wanted = set(pairs)
     if not wanted:
         return {}
@@ -137,8 +140,6 @@ def provenance(role: str, row: Any) -> Provenance:
 
 
 def _uv_transform(params: dict[str, Any] | None) -> Any:
-    from photoshape_flow.render import UVTransform
-
     uv = (params or {}).get("uv")
     if not isinstance(uv, dict):
         return None
@@ -172,10 +173,6 @@ class PhotoShape:
 def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key: str,
                     envmap: m.Envmap | None = None) -> PhotoShape:
     """Read a candidate's rows and blobs into render/export inputs; a one-line error when incomplete."""
-    from photoshape_flow.geometry.mesh import ShapeMesh
-    from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
-    from photoshape_flow.render import Camera, Refinement
-
     pair = session.get(m.Pair, pair_id)
     if pair is None:
         raise ValueError(f"pair {pair_id}: no such pair")
@@ -256,8 +253,6 @@ def framed_views(mesh: Any, camera: Any, views: int) -> list[tuple[str, Any]]:
     Publish renders these cameras and the exports write the exemplar one, so a downloaded scene
     shows what the gallery shows.
     """
-    from photoshape_flow.align.partmap import zoom_to_fit
-
     return [(view, zoom_to_fit(mesh, cam, margin=FRAME_MARGIN)) for view, cam in views_of(camera, views)]
 
 

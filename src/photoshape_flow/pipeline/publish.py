@@ -42,6 +42,7 @@ from sqlalchemy.orm import Session
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.export.bundle import export_photoshape
 from photoshape_flow.export.formats import DEFAULT_FORMATS, parse_formats
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.downloads import export_dir, export_manifest
@@ -57,8 +58,10 @@ from photoshape_flow.pipeline.photoshapes import (
     render_key,
     render_seed,
 )
+from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, writing_stage
 from photoshape_flow.progress_sink import Progress, counted
+from photoshape_flow.render import Renderer
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -110,9 +113,6 @@ def run_publish(
     progress: Progress | None = None,
 ) -> PublishSummary:
     """Render and export every candidate of `method` (all pairs, or `pair_ids`); resumable, idempotent."""
-    from photoshape_flow.export.bundle import export_photoshape
-    from photoshape_flow.pipeline.renderings import record_rendering
-
     settings = settings or get_settings()
     formats = parse_formats(list(formats))
     url = settings.resolved_database_url
@@ -176,8 +176,6 @@ def run_publish(
                 summary.skipped += 1
                 continue
             if renderer is None:
-                from photoshape_flow.render import Renderer
-
                 renderer = Renderer(resolve=store.resolve)
             started = time.perf_counter()
             common = {"kind": kind, "key": key, "params": params, "shape_id": item.shape_id, "pair_id": pair_id,

@@ -21,9 +21,12 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from photoshape_flow.align.partmap import zoom_to_fit
 from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.groundtruth import TruthEntry
+from photoshape_flow.pipeline.photoshapes import choose_envmap
 from photoshape_flow.pipeline.rerender_eval import MaterialSpecs, Refinements, ShapeMeshes
+from photoshape_flow.render import Camera, EnvmapSpec, Renderer
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -50,7 +53,6 @@ def held_out_envmap(session: Session) -> m.Envmap | None:
     held = [e for e in rows if (e.split or "train") != "train"]
     if held:
         return held[0]
-    from photoshape_flow.pipeline.photoshapes import choose_envmap
 
     return choose_envmap(session)
 
@@ -73,8 +75,6 @@ class Relighter:
     """Renders a shape with given materials under one envmap from the three novel views of a pair."""
 
     def __init__(self, session: Session, store: BlobStore, size: int, spp: int):
-        from photoshape_flow.render import EnvmapSpec, Renderer
-
         self.store = store
         self.size = size
         self.spp = spp
@@ -88,9 +88,6 @@ class Relighter:
     def views(self, session: Session, pair: m.Pair, materials: Mapping[int, int | None],
               refinements: Refinements | None = None) -> list[tuple[Any, Any]]:
         """(sRGB uint8, alpha mask) of each novel view."""
-        from photoshape_flow.align.partmap import zoom_to_fit
-        from photoshape_flow.render import Camera
-
         mesh = self.meshes.get(session, pair.shape_id)
         specs = self.specs.for_parts(session, mesh.parts, materials, refinements)
         out = []

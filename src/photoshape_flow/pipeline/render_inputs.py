@@ -8,14 +8,13 @@ from pathlib import Path
 from typing import Any
 
 from photoshape_flow.db import models as m
+from photoshape_flow.render import EnvmapSpec, MaterialSpec
+from photoshape_flow.render.specs import CHANNELS
 from photoshape_flow.store import BlobStore
 
 
 def material_spec(row: m.Material, store: BlobStore) -> Any:
     """A render `MaterialSpec` from a Material row (maps resolved to blob paths)."""
-    from photoshape_flow.render import MaterialSpec
-    from photoshape_flow.render.specs import CHANNELS
-
     maps: dict[str, Path] = {ch: store.resolve(ref) for ch, ref in (row.maps or {}).items() if ch in CHANNELS and ref}
     return MaterialSpec(
         name=row.name, substance=row.substance, maps=maps, params=dict(row.params or {}), scale=row.default_scale
@@ -24,6 +23,4 @@ def material_spec(row: m.Material, store: BlobStore) -> Any:
 
 def envmap_spec(row: m.Envmap, store: BlobStore) -> Any:
     """A render `EnvmapSpec` from an Envmap row (its HDR image resolved to a blob path)."""
-    from photoshape_flow.render import EnvmapSpec
-
     return EnvmapSpec(path=store.resolve(row.blob))

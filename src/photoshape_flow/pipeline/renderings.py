@@ -26,6 +26,7 @@ from photoshape_flow.db.models import Rendering
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.faults import fault_point
 from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import RENDERING_KINDS
 
 log = logging.getLogger(__name__)
 
@@ -90,8 +91,6 @@ def record_rendering(
     ``blobs`` maps pass name -> ref. An empty `images` records a row without passes (e.g. a failure
     with ``status="failed"`` and ``error``). The caller's session commits; blobs are durable first.
     """
-    from photoshape_flow.vocab import RENDERING_KINDS
-
     if kind not in RENDERING_KINDS:
         raise ValueError(f"unknown rendering kind {kind!r}; expected one of {', '.join(RENDERING_KINDS)}")
     blobs: dict[str, str] = {}

@@ -21,6 +21,11 @@ from sqlalchemy.orm import Session
 from photoshape_flow.align.partmap import crop_square, exemplar_at, square_box, zoom_to_fit
 from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.tables import REFINED
+from photoshape_flow.geometry.mesh import ShapeMesh
+from photoshape_flow.pipeline.photoshapes import choose_envmap
+from photoshape_flow.pipeline.render_inputs import material_spec
+from photoshape_flow.render import Camera, EnvmapSpec, Renderer
+from photoshape_flow.render.specs import Refinement
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -37,13 +42,10 @@ class MaterialSpecs:
 
     def get(self, session: Session, material_id: int, refinement: Mapping[str, Any] | None = None) -> Any:
         if material_id not in self._specs:
-            from photoshape_flow.pipeline.render_inputs import material_spec
-
             self._specs[material_id] = material_spec(session.get(m.Material, material_id), self.store)
         spec = self._specs[material_id]
         if spec is None or not refinement:
             return spec
-        from photoshape_flow.render.specs import Refinement
 
         return replace(spec, refinement=Refinement.from_dict(refinement))
 
@@ -63,8 +65,6 @@ class ShapeMeshes:
         self._meshes: dict[int, Any] = {}
 
     def get(self, session: Session, shape_id: int) -> Any:
-        from photoshape_flow.geometry.mesh import ShapeMesh
-
         if shape_id not in self._meshes:
             self._meshes[shape_id] = ShapeMesh.from_npz_bytes(
                 self.store.read_bytes(session.get(m.Shape, shape_id).mesh_blob))
@@ -75,8 +75,6 @@ class Rerenderer:
     """Renders a pair's PhotoShape at the exemplar's camera, cropped like the exemplar."""
 
     def __init__(self, store: BlobStore, size: int, spp: int):
-        from photoshape_flow.render import Renderer
-
         self.store = store
         self.size = size
         self.spp = spp
@@ -86,15 +84,11 @@ class Rerenderer:
         self.envmap = None
 
     def set_envmap(self, envmap: m.Envmap | None) -> None:
-        from photoshape_flow.render import EnvmapSpec
-
         if envmap is not None and envmap.blob:
             self.envmap = EnvmapSpec(self.store.resolve(envmap.blob))
 
     def render(self, session: Session, pair: m.Pair, materials: Mapping[int, int | None],
                refinements: Refinements | None = None) -> tuple[np.ndarray, np.ndarray]:
-        from photoshape_flow.render import Camera
-
         mesh = self.meshes.get(session, pair.shape_id)
         specs = self.specs.for_parts(session, mesh.parts, materials, refinements)
         camera = zoom_to_fit(mesh, Camera(pair.azimuth, pair.elevation, pair.camera_distance, pair.fov))
@@ -150,8 +144,6 @@ class RerenderScores:
     def error(self, session: Session, pair: m.Pair, exemplar: m.Exemplar, method_key: str,
               chosen: dict[int, int | None], refinements: dict[int, Any] | None) -> tuple[float, float] | None:
         if self.rerenderer is None:
-            from photoshape_flow.pipeline.photoshapes import choose_envmap
-
             self.rerenderer = Rerenderer(self.store, self.size, self.spp)
             self.rerenderer.set_envmap(choose_envmap(session))
         try:

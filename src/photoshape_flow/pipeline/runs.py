@@ -13,6 +13,8 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
+from photoshape_flow.db.base import utcnow
+from photoshape_flow.db.holder import is_dead
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, ResolvedProfile, resolve_profile
 
 DIED = "died"  # the status of a run whose process ended without recording its end
@@ -27,9 +29,6 @@ def mark_dead_runs(session: Session) -> list[int]:
     another host, or recorded before holders were, is left as it is: nothing there is provable.
     Called by `status` and by every new run, so neither shows a dead run as running.
     """
-    from photoshape_flow.db.base import utcnow
-    from photoshape_flow.db.holder import is_dead
-
     rows = session.execute(sa.select(m.PipelineRun).where(m.PipelineRun.status == "running",
                                                           m.PipelineRun.holder_pid.is_not(None))).scalars().all()
     dead = [row for row in rows if is_dead(row.holder_host, row.holder_pid, row.holder_started)]

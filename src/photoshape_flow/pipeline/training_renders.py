@@ -43,9 +43,12 @@ import sqlalchemy as sa
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
+from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.progress_sink import Progress, no_progress
+from photoshape_flow.render import Renderer
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
@@ -264,8 +267,6 @@ class RenderInputs:
 
     def mesh(self, shape_id: int) -> Any:
         if shape_id not in self.meshes:
-            from photoshape_flow.geometry.mesh import ShapeMesh
-
             self.meshes[shape_id] = ShapeMesh.from_npz_bytes(self.store.read_bytes(self.shapes[shape_id].mesh_blob))
         return self.meshes[shape_id]
 
@@ -310,8 +311,6 @@ def run_training_renders(
     """
     if round not in ROUNDS:
         raise ValueError(f"round must be one of {ROUNDS}, got {round!r}")
-    from photoshape_flow.pipeline.renderings import record_rendering
-
     settings = settings or get_settings()
     url = settings.resolved_database_url
     store = BlobStore(settings.blob_root)
@@ -366,8 +365,6 @@ def run_training_renders(
         if not pending:
             continue
         if renderer is None:
-            from photoshape_flow.render import Renderer
-
             renderer = Renderer(resolve=store.resolve)
         for spec, params_hash in pending:
             started = time.perf_counter()

@@ -23,6 +23,8 @@ from functools import lru_cache
 from typing import Any
 
 from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.pool import beauty_pool, slot_key
+from photoshape_flow.render.renderer import _RENDER_LOCK
 from photoshape_flow.render.runtime import ensure_mitsuba
 from photoshape_flow.render.scene import SceneOptions
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec
@@ -35,8 +37,6 @@ def _integrator(max_depth: int) -> Any:
 
 
 def _key(slot: int, texture: str) -> str:
-    from photoshape_flow.render.pool import slot_key
-
     return f"{slot_key(slot)}.bsdf.nested_bsdf.{texture}.data"
 
 
@@ -59,9 +59,6 @@ class GradientScene:
         self._base: dict[str, Any] = {}
 
     def __enter__(self) -> GradientScene:
-        from photoshape_flow.render.pool import beauty_pool
-        from photoshape_flow.render.renderer import _RENDER_LOCK
-
         self._lock = _RENDER_LOCK
         self._lock.acquire()
         try:

@@ -40,6 +40,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from photoshape_flow.config import get_settings
 from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.pool import ENVMAP_RESOLUTION, beauty_pool
@@ -48,6 +49,7 @@ from photoshape_flow.render.runtime import ensure_mitsuba
 from photoshape_flow.render.scene import SceneOptions, build_scene, part_index_from_key
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, UVTransform, material_from_builtin
 from photoshape_flow.render.tonemap import composite, saturated_fraction
+from photoshape_flow.store import BlobStore
 
 _RENDER_LOCK = threading.RLock()
 
@@ -121,9 +123,6 @@ class Renderer:
     # -- materials -------------------------------------------------------------------------
     def resolve_ref(self, ref: str) -> Path:
         if self._resolve is None:
-            from photoshape_flow.config import get_settings
-            from photoshape_flow.store import BlobStore
-
             self._resolve = BlobStore(get_settings().blob_root).resolve
         return Path(self._resolve(ref))
 

@@ -16,6 +16,8 @@ import re
 import threading
 from typing import Any
 
+from photoshape_flow.config import get_settings
+
 LLVM_HINT = (
     "install a newer LLVM: `apt-get install -y libllvm19` (Debian 12's default libllvm15 aborts on the "
     "first render; Dr.Jit picks the newest libLLVM it finds)"
@@ -55,8 +57,6 @@ def ensure_mitsuba(variant: str | None = None, threads: int | None = None) -> An
 
     Raises `RendererUnavailableError` with a fix hint when LLVM is missing or too old.
     """
-    from photoshape_flow.config import get_settings
-
     settings = get_settings()
     variant = variant or settings.render_variant
     threads = max(2, threads or settings.effective_render_threads)

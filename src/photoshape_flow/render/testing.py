@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from photoshape_flow.geometry.mesh import PartMesh, ShapeMesh
+from photoshape_flow.render.camera import Camera
 
 
 def quad_part(
@@ -155,8 +156,6 @@ def procedural_chair(target_faces: int = 50_000) -> ShapeMesh:
 def paper_viewpoints(distance: float = 2.0, fov: float = 50.0, equator: int = 50, rings: int = 10) -> list:
     """The paper's coarse-alignment views: phi in linspace(pi/4, 9pi/16, rings), round(equator * sin phi)
     azimuths each over [0, 2pi); 456 views with the defaults (section 4.1)."""
-    from photoshape_flow.render.camera import Camera
-
     cameras = []
     for phi in np.linspace(math.pi / 4, 9 * math.pi / 16, rings):
         count = int(round(equator * math.sin(phi)))

@@ -10,6 +10,9 @@ from typing import Any
 
 import sqlalchemy as sa
 
+from photoshape_flow.db import models as m
+from photoshape_flow.pipeline import coarse_alignment as coarse
+from photoshape_flow.pipeline.coarse_alignment import CoarseConfig, compute_pairs
 from photoshape_flow.profiles import CoarseAlignmentConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -19,8 +22,6 @@ NAME = "coarse-alignment"
 
 
 def _config(cfg: CoarseAlignmentConfig) -> Any:
-    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig
-
     return CoarseConfig(exemplar_topk=cfg.exemplar_topk, shape_topn=cfg.shape_topn)
 
 
@@ -31,8 +32,6 @@ def _features_report(part: str, counts: dict[str, Any]) -> StageReport:
 
 
 def plan(ctx: StageContext, cfg: CoarseAlignmentConfig) -> list[WorkUnit]:
-    from photoshape_flow.db import models as m
-
     units = []
     with ctx.session() as session:
         for part, model in (("shapes", m.Shape), ("exemplars", m.Exemplar)):
@@ -45,8 +44,6 @@ def plan(ctx: StageContext, cfg: CoarseAlignmentConfig) -> list[WorkUnit]:
 
 def versions(ctx: StageContext, cfg: CoarseAlignmentConfig, unit: WorkUnit) -> dict[int, str]:
     """A shape's mesh blob, an exemplar's image and mask blobs: re-ingesting new content re-opens the item."""
-    from photoshape_flow.db import models as m
-
     columns = {"shapes": (m.Shape, m.Shape.mesh_blob), "exemplars": (m.Exemplar, m.Exemplar.image_blob)}
     model, blob = columns[unit.part]
     extra = m.Exemplar.mask_blob if unit.part == "exemplars" else sa.literal("")
@@ -56,8 +53,6 @@ def versions(ctx: StageContext, cfg: CoarseAlignmentConfig, unit: WorkUnit) -> d
 
 
 def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = None) -> StageReport:
-    from photoshape_flow.pipeline import coarse_alignment as coarse
-
     config = _config(cfg)
     if work is None:
         report = _features_report("shapes", coarse.compute_view_features(
@@ -79,7 +74,5 @@ def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = N
 
 def finish(ctx: StageContext, cfg: CoarseAlignmentConfig) -> StageReport:
     """Exact retrieval over all descriptors, inverted into per-shape pairs."""
-    from photoshape_flow.pipeline.coarse_alignment import compute_pairs
-
     pairs = compute_pairs(config=_config(cfg), settings=ctx.settings)
     return StageReport(NAME, details={"pairs": pairs})

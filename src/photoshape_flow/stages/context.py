@@ -15,6 +15,7 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db.session import session_scope
 from photoshape_flow.events import NO_EVENTS, EventSink
 from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore
@@ -46,8 +47,6 @@ class StageContext:
 
     def session(self) -> AbstractContextManager[Session]:
         """A transaction: committed when the block ends, rolled back on an exception."""
-        from photoshape_flow.db.session import session_scope
-
         return session_scope(self.database_url)
 
     @property

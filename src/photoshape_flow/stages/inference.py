@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 
+from photoshape_flow.db import models as m
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import InferenceConfig
 from photoshape_flow.stages.context import StageContext
@@ -34,8 +35,6 @@ def methods_to_run(ctx: StageContext, cfg: InferenceConfig) -> list[str]:
 
 
 def plan(ctx: StageContext, cfg: InferenceConfig) -> list[WorkUnit]:
-    from photoshape_flow.db import models as m
-
     with ctx.session() as session:
         ids = tuple(session.execute(active_pairs().order_by(m.Pair.id)).scalars())
     return [WorkUnit(method, ids) for method in methods_to_run(ctx, cfg)]

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.pipeline import ingest_common
+from photoshape_flow.pipeline import ingest, ingest_common
 from photoshape_flow.profiles import IngestConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -39,8 +39,6 @@ def _collection(name: str, paths: list[Path], kwargs: dict[str, Any]) -> Any:
     """One collection's ingest; should it raise outside its items (an unreadable folder while walking
     it), that is one rejected line for the collection, and the other collections still go in: a poison
     file in the inbox never fails a run."""
-    from photoshape_flow.pipeline import ingest
-
     summary = ingest.IngestSummary(name)
     function = getattr(ingest, f"ingest_{name}")
     done = ingest_common.guard_item(summary, ", ".join(str(p) for p in paths), lambda: function(paths, **kwargs))

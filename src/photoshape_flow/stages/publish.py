@@ -6,6 +6,10 @@ from pathlib import Path
 
 import sqlalchemy as sa
 
+from photoshape_flow.db import models as m
+from photoshape_flow.pipeline.gallery_site import write_gallery_site
+from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
+from photoshape_flow.pipeline.publish import run_publish
 from photoshape_flow.profiles import PublishConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -20,8 +24,6 @@ def gallery_dir(ctx: StageContext) -> Path:
 
 def plan(ctx: StageContext, cfg: PublishConfig) -> list[WorkUnit]:
     """Pairs up to the configured rank of their shape (excluded pairs never)."""
-    from photoshape_flow.db import models as m
-
     with ctx.session() as session:
         ids = session.execute(
             sa.select(m.Pair.id).where(m.Pair.rank <= cfg.max_rank, ~m.Pair.exclude).order_by(m.Pair.id)
@@ -36,8 +38,6 @@ def versions(ctx: StageContext, cfg: PublishConfig, unit: WorkUnit) -> dict[int,
     A new classifier's, a re-ranked or a re-fitted assignment changes the key, so the pair is claimed
     and rendered again, by `photoshape run publish` and the Prefect deployment alike.
     """
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
-
     with ctx.session() as session:
         shown = candidate_method_keys(session, cfg.method, unit.ids)
         keys = assignment_set_keys(session, shown)
@@ -45,8 +45,6 @@ def versions(ctx: StageContext, cfg: PublishConfig, unit: WorkUnit) -> dict[int,
 
 
 def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> StageReport:
-    from photoshape_flow.pipeline.publish import run_publish
-
     ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
     summary = run_publish(ids, cfg.method, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
                           formats=cfg.formats, progress=ctx.progress)
@@ -59,8 +57,6 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
 def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far with `publish.method`."""
-    from photoshape_flow.pipeline.gallery_site import write_gallery_site
-
     site = write_gallery_site(gallery_dir(ctx), cfg.method, ctx.settings, progress=ctx.progress)
     return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
                                       "gallery_waiting": site.waiting, "method": cfg.method})

@@ -21,9 +21,13 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import claims
+from photoshape_flow.db import models as m
+from photoshape_flow.db.base import utcnow
 from photoshape_flow.db.heartbeat import Heartbeat
+from photoshape_flow.db.holder import this_process
 from photoshape_flow.faults import fault_point
 from photoshape_flow.pipeline.progress import StageProgress
+from photoshape_flow.pipeline.runs import mark_dead_runs
 from photoshape_flow.profiles import Profile, ResolvedProfile, resolve_profile
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.registry import REGISTRY, Stage, get_stage
@@ -163,10 +167,6 @@ def _after_wait(before: StageReport, again: StageReport) -> StageReport:
 
 
 def start_run(ctx: StageContext, resolved: ResolvedProfile, stages: Sequence[str], origin: str) -> int:
-    from photoshape_flow.db import models as m
-    from photoshape_flow.db.holder import this_process
-    from photoshape_flow.pipeline.runs import mark_dead_runs
-
     record = resolved.record()
     holder = this_process()
     with ctx.session() as session:
@@ -180,8 +180,6 @@ def start_run(ctx: StageContext, resolved: ResolvedProfile, stages: Sequence[str
 
 
 def record_report(ctx: StageContext, run_id: int, report: StageReport) -> None:
-    from photoshape_flow.db import models as m
-
     with ctx.session() as session:
         row = session.get(m.PipelineRun, run_id)
         if row is not None:
@@ -189,9 +187,6 @@ def record_report(ctx: StageContext, run_id: int, report: StageReport) -> None:
 
 
 def finish_run(ctx: StageContext, run_id: int, error: str | None, status: str | None = None) -> None:
-    from photoshape_flow.db import models as m
-    from photoshape_flow.db.base import utcnow
-
     with ctx.session() as session:
         row = session.get(m.PipelineRun, run_id)
         if row is not None:

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.profiles import SubstancesConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
+from photoshape_flow.stages.training_renders import pool_versions
 from photoshape_flow.stages.work import WorkUnit
 
 NAME = "substances"
@@ -22,8 +24,6 @@ def plan(ctx: StageContext, cfg: SubstancesConfig) -> list[WorkUnit]:
 
 
 def versions(ctx: StageContext, cfg: SubstancesConfig, unit: WorkUnit) -> dict[int, str]:
-    from photoshape_flow.stages.training_renders import pool_versions
-
     return pool_versions(ctx, "bootstrap", unit)
 
 
@@ -46,8 +46,6 @@ def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
 
 
 def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> StageReport:
-    from photoshape_flow.pipeline.training_renders import run_training_renders
-
     renders = run_training_renders("bootstrap", cfg.bootstrap_count, cfg.size, cfg.spp, ctx.settings,
                                    renderer=ctx.renderer, indices=work.ids, progress=ctx.progress)
     counts = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}

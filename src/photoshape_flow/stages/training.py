@@ -8,6 +8,7 @@ temperature needs the training round's validation renders and inference must onl
 from __future__ import annotations
 
 from photoshape_flow.classify.configs import ClassifierConfig
+from photoshape_flow.db import models as m
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
 
@@ -15,7 +16,6 @@ NAME = "training"
 
 
 def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageReport:
-    from photoshape_flow.db import models as m
     from photoshape_flow.pipeline.calibration import calibrate
     from photoshape_flow.pipeline.training import run_training
 

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from photoshape_flow.db import models as m
+from photoshape_flow.hashing import stable_hash
+from photoshape_flow.pipeline.training_renders import load_pools, run_training_renders
 from photoshape_flow.profiles import TrainingRendersConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
@@ -32,9 +35,6 @@ def pools_digest(session: Any, round: str) -> str:
 
     import sqlalchemy as sa
 
-    from photoshape_flow.db import models as m
-    from photoshape_flow.hashing import stable_hash
-    from photoshape_flow.pipeline.training_renders import load_pools
 
     try:
         pools = asdict(load_pools(session, round))  # type: ignore[arg-type]
@@ -62,8 +62,6 @@ def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> d
 
 
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
-    from photoshape_flow.pipeline.training_renders import run_training_renders
-
     summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer,
                                    indices=None if work is None else work.ids, progress=ctx.progress)
     return StageReport(

@@ -18,9 +18,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from photoshape_flow.config import get_settings
 from photoshape_flow.store import codecs
 from photoshape_flow.store.local import LocalBackend
 from photoshape_flow.store.refs import TEMP_PREFIX, check_ref, is_ref, is_url, ref_for
+from photoshape_flow.store.remote import FsspecBackend
 from photoshape_flow.store.stored import GcReport, StoredFile
 
 
@@ -46,11 +48,7 @@ def open_backend(root: str | os.PathLike[str], cache_root: str | os.PathLike[str
     """
     if not is_url(root):
         return LocalBackend(root)
-    from photoshape_flow.store.remote import FsspecBackend
-
     if cache_root is None:
-        from photoshape_flow.config import get_settings
-
         cache_root = get_settings().blob_cache_root
     return FsspecBackend(str(root), cache_root)
 

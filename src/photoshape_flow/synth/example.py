@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -81,8 +82,6 @@ def build_scene_inputs(
     shape_mesh: Any, spec: RenderSpec, material_specs: Mapping[int, Any], envmap_spec: Any
 ) -> tuple[Any, list[Any], list[Any], Any]:
     """Camera, per-part materials and UV transforms (in `shape_mesh.parts` order) and the envmap."""
-    from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
-
     by_index = {p.index: p for p in spec.parts}
     materials: list[Any] = []
     uv_transforms: list[Any] = []

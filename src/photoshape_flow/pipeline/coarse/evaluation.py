@@ -14,9 +14,11 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.demo.groundtruth import exemplar_records, record_field, source_keys
 from photoshape_flow.evaluation.bootstrap import OBSERVATIONS
+from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.pipeline.coarse.config import CoarseConfig
 from photoshape_flow.pipeline.coarse.reverse_index import load_reverse_index
 from photoshape_flow.pipeline.coarse.viewpoint_sets import config_viewpoint_set
+from photoshape_flow.render import renderer as render_module
 from photoshape_flow.store import BlobStore
 
 
@@ -86,11 +88,7 @@ def evaluate_coarse_alignment(
                 el_err.append(float(del_))
         if len(retrieved) and mask_blob is not None and meshes.get(retrieved[0]):
             if renderer is None:
-                from photoshape_flow.render import renderer as render_module
-
                 renderer = render_module.Renderer()
-            from photoshape_flow.geometry.mesh import ShapeMesh
-
             sid = retrieved[0]
             if sid not in mesh_cache:
                 mesh_cache[sid] = ShapeMesh.from_npz_bytes(store.read_bytes(meshes[sid]))

@@ -23,6 +23,7 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.pipeline.coarse.config import CoarseConfig
 from photoshape_flow.pipeline.coarse.viewpoint_sets import (
     config_viewpoint_set,
@@ -31,6 +32,7 @@ from photoshape_flow.pipeline.coarse.viewpoint_sets import (
 )
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
+from photoshape_flow.render import renderer as render_module
 from photoshape_flow.store import BlobStore
 
 log = logging.getLogger(__name__)
@@ -67,11 +69,7 @@ def compute_view_features(
         expected = {sid: view_feature_hash(config, vpset, blob) for sid, blob in shapes}
     pending = _pending(shapes, existing, expected, limit)
     if pending and renderer is None:
-        from photoshape_flow.render import renderer as render_module
-
         renderer = render_module.Renderer()
-    from photoshape_flow.geometry.mesh import ShapeMesh
-
     def shard(item: Sequence[Any]) -> dict[str, Any]:
         item_start = time.perf_counter()
         mesh = ShapeMesh.from_npz_bytes(store.read_bytes(item[1]))
