@@ -124,7 +124,7 @@ class FitContext:
         return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
 
     def light_envmap(self, light: dict[str, Any]) -> Any:
-        """The render spec of an exemplar's stored lighting (`pipeline.fit.lighting_estimate`): its training
+        """The render spec of an exemplar's stored lighting (`pipeline.fit_steps.lighting_estimate`): its training
         envmap at its rotation."""
         return self.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
 
