@@ -3,8 +3,8 @@ and no function-local import of a package module outside `cli/` but for a short,
 
 An import inside a function hides an edge from the reader and from this test's ordinary view; it is
 how circles between stages grew unnoticed (issue 43). So both kinds of edge count for the circle
-check, and function-local ones are allowed only where the import is heavy (torch, Mitsuba's LLVM)
-and the importer sits on a path that must stay light (`photoshape --help`, see
+check, and function-local ones are allowed only where the import is heavy (torch, or numpy for
+`photoshape --help`) and the importer sits on a path that must stay light (`LIGHT`, see
 `tests/test_profiles.py::test_profiles_and_the_cli_load_without_torch`). `if TYPE_CHECKING:` imports
 are not executed and do not count.
 """
@@ -23,12 +23,16 @@ ROOT = Path(__file__).resolve().parents[1] / "src" / PACKAGE
 # of the graph (flows import stages) and the migration scripts; this test does not read them.
 OUTSIDE_SRC = (f"{PACKAGE}.flows", f"{PACKAGE}.migrations")
 
-# Modules that must load without torch (statically: their module-level imports, followed through the
-# package, reach no module that imports torch at its top): `photoshape --help` loads the CLI and the
+# Modules that must load without these (statically: their module-level imports, followed through the
+# package, reach no module that imports one at its top): `photoshape --help` loads the CLI and the
 # profiles (`tests/test_profiles.py`), flows and `photoshape status`/`claims`/`serve` load the stage
 # registry, and the colour likelihood is the ranking rule's, read without a network.
-TORCH_FREE = (f"{PACKAGE}.cli", f"{PACKAGE}.profiles", f"{PACKAGE}.stages", f"{PACKAGE}.classify.color_prior")
-HEAVY = ("torch", "torchvision")
+LIGHT: dict[str, tuple[str, ...]] = {
+    f"{PACKAGE}.cli": ("torch", "numpy"),
+    f"{PACKAGE}.profiles": ("torch", "numpy"),
+    f"{PACKAGE}.stages": ("torch",),
+    f"{PACKAGE}.classify.color_prior": ("torch",),
+}
 
 _STAGE_REGISTRY = "the stage registry (flows, `photoshape status`) loads every stage module; this one imports torch"
 
@@ -275,8 +279,8 @@ def test_the_allow_list_has_no_stale_entries() -> None:
     assert not (stale := sorted(set(LAZY_ALLOWED) - local)), f"no longer imported lazily: {stale}"
 
 
-def _heavy_at_top(path: Path) -> bool:
-    """Whether a module imports torch at its top (outside functions and `if TYPE_CHECKING:`)."""
+def _imports_at_top(path: Path, heavy: tuple[str, ...]) -> bool:
+    """Whether a module imports one of `heavy` at its top (outside functions and `if TYPE_CHECKING:`)."""
 
     def visit(node: ast.AST) -> bool:
         for child in ast.iter_child_nodes(node):
@@ -285,27 +289,27 @@ def _heavy_at_top(path: Path) -> bool:
                 continue
             names = ([a.name for a in child.names] if isinstance(child, ast.Import) else
                      [child.module or ""] if isinstance(child, ast.ImportFrom) and not child.level else [])
-            if any(n.split(".")[0] in HEAVY for n in names) or visit(child):
+            if any(n.split(".")[0] in heavy for n in names) or visit(child):
                 return True
         return False
 
     return visit(ast.parse(path.read_text(encoding="utf-8")))
 
 
-def test_the_light_entry_points_reach_no_torch_at_import() -> None:
-    """What LAZY_ALLOWED's reasons rely on: the module-level closure of TORCH_FREE imports no torch."""
+def test_the_light_entry_points_load_nothing_heavy() -> None:
+    """What LAZY_ALLOWED's reasons rely on: the module-level closure of each LIGHT module."""
     graph = _graph(local=False)
-    for root in TORCH_FREE:
+    for root, heavy in LIGHT.items():
         parents: dict[str, str | None] = {root: None}
         todo = [root]
         while todo:
             node = todo.pop()
-            if _heavy_at_top(modules()[node]):
+            if _imports_at_top(modules()[node], heavy):
                 chain = [node]
                 while (up := parents[chain[-1]]) is not None:
                     chain.append(up)
                 path = " -> ".join(map(_short, reversed(chain)))
-                raise AssertionError(f"{_short(root)} imports torch when loaded: {path}")
+                raise AssertionError(f"{_short(root)} imports {' or '.join(heavy)} when loaded: {path}")
             for nxt in sorted(graph[node] - parents.keys()):
                 parents[nxt] = node
                 todo.append(nxt)
