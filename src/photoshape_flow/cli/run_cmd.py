@@ -112,7 +112,18 @@ def run(
             resolved, ctx, names=None if stage == "all" else [stage], wait=wait,
             on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")))
     print_reports(reports)
+    if any(r.stage == "publish" for r in reports):
+        print_outputs(ctx)
     exit_if_inputs_rejected(reports)
+
+
+def print_outputs(ctx: Any) -> None:
+    """Where publish's results are: the gallery's index page and the exports folder."""
+    from photoshape_flow.pipeline.downloads import exports_root
+    from photoshape_flow.stages.publish import gallery_dir
+
+    console.print(f"gallery:  {gallery_dir(ctx) / 'index.html'}", highlight=False, soft_wrap=True)
+    console.print(f"exports:  {exports_root(ctx.settings)}", highlight=False, soft_wrap=True)
 
 
 def exit_if_inputs_rejected(reports: Sequence[StageReport]) -> None:
