@@ -59,13 +59,14 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
                     key: str = "photoshape-run-summary", changes: dict[str, int] | None = None) -> None:
     """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage, and
     (`changes`, a `FitChanges` as a dict) how many parts the run's fit changed."""
-    from photoshape_flow.pipeline.progress import assumed_profile
+    from photoshape_flow.pipeline.progress import assumed_profile, rendering_progress
     from photoshape_flow.pipeline.runs import mark_dead_runs
     from photoshape_flow.stages import stage_progress
 
     with session_scope(get_settings().resolved_database_url) as session:
         mark_dead_runs(session)  # the summary's counts never include a killed run as running
         progress = stage_progress(session)
+        renderings = rendering_progress(session)
         assumed = assumed_profile(session)
     lines = [f"# {title}", "", f"Counts assume {assumed.describe()}.", "",
              "| stage | seconds | unit | done | pending | failed | rejected |", "|---|---:|---|---:|---:|---:|---:|"]
@@ -73,6 +74,10 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
         seconds = stage_times.get(p.stage)
         shown = f"{seconds:.1f}" if seconds is not None else ""
         lines.append(f"| {p.stage} | {shown} | {p.unit} | {p.done} | {p.pending} | {p.failed} | {p.rejected} |")
+    if renderings:
+        lines += ["", "| rendering | made by | ok | failed | rejected | why rejected |", "|---|---|---:|---:|---:|---|"]
+        lines += [f"| {r.kind} | {r.stage} | {r.ok} | {r.failed} | {r.rejected} | "
+                  f"{r.reasons_text().replace('|', '/')} |" for r in renderings]
     if changes:
         lines += ["", "| fit: parts | candidate set grew | winner changed | won by a new material |",
                   "|---:|---:|---:|---:|",

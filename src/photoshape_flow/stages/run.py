@@ -246,14 +246,18 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
     mine = tuple(int(k) for k in won)
     if not mine:
         return StageReport(name, skipped=len(unit.ids) - blocked.count, blocked=blocked)
-    fault_point("claimed-before-result")
     try:
+        fault_point("claimed-before-result")
         with Heartbeat(ctx.database_url, lease):
             report = _timed(lambda: stage.run(ctx, cfg, WorkUnit(unit.part, mine)))
     except Exception as exc:
         with ctx.session() as session:
             for key in won:
                 claims.fail(session, claim_stage, key, f"{type(exc).__name__}: {exc}")
+        raise
+    except BaseException:  # Ctrl-C, a stop: the items go back unclaimed, never left `claimed` by this run
+        with ctx.session() as session:
+            claims.release(session, claim_stage, won)
         raise
     with ctx.session() as session:
         claims.complete(session, claim_stage, won)
