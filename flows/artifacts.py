@@ -23,18 +23,17 @@ from photoshape_flow.progress_sink import progress_line
 
 def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None,
                    method: str = "classifier") -> list[dict[str, Any]]:
-    """One row per PhotoShape candidate of `method` (what `publish.method` shows): pair, shape, exemplar,
-    method key, weakest and mean part posterior (the raw score for rows without one: fit's, and
-    rows ranked before inference-9)."""
+    """One row per PhotoShape candidate of `method` (what `publish.method` shows), best first: pair,
+    shape and exemplar by name, method key, the gallery's score (mean part confidence over the parts
+    seen), the weakest part's confidence, whether it is published, its grade."""
     query = """
-        SELECT pair_id, shape_id, exemplar_id, method_key, COUNT(*) AS parts,
-               MIN(COALESCE(posterior, score)) AS weakest_part, AVG(COALESCE(posterior, score)) AS mean_score,
-               MIN(hog_distance) AS hog_distance,
-               MIN(alignment_iou) AS alignment_iou
+        SELECT pair_id, shape_name, exemplar_name, method_key, COUNT(*) AS parts,
+               score, MIN(confidence) AS weakest_part, published, grade,
+               MIN(hog_distance) AS hog_distance, MIN(alignment_iou) AS alignment_iou
         FROM photoshape_candidate
         WHERE method = :method
-        GROUP BY pair_id, shape_id, exemplar_id, method_key
-        ORDER BY mean_score DESC, pair_id
+        GROUP BY pair_id, shape_name, exemplar_name, method_key, score, published, grade
+        ORDER BY score DESC, pair_id
     """
     with session_scope(get_settings().resolved_database_url) as session:
         rows = [dict(r._mapping) for r in session.execute(sa.text(query), {"method": method})]
@@ -42,7 +41,8 @@ def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None
         wanted = set(since_pair_ids)
         rows = [r for r in rows if r["pair_id"] in wanted]
     for r in rows:
-        for key in ("weakest_part", "mean_score", "hog_distance", "alignment_iou"):
+        r["published"] = bool(r["published"])
+        for key in ("score", "weakest_part", "hog_distance", "alignment_iou"):
             if r[key] is not None:
                 r[key] = round(float(r[key]), 4)
     return rows[:limit]
@@ -59,13 +59,14 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
                     key: str = "photoshape-run-summary", changes: dict[str, int] | None = None) -> None:
     """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage, and
     (`changes`, a `FitChanges` as a dict) how many parts the run's fit changed."""
-    from photoshape_flow.pipeline.progress import assumed_profile
+    from photoshape_flow.pipeline.progress import assumed_profile, rendering_progress
     from photoshape_flow.pipeline.runs import mark_dead_runs
     from photoshape_flow.stages import stage_progress
 
     with session_scope(get_settings().resolved_database_url) as session:
         mark_dead_runs(session)  # the summary's counts never include a killed run as running
         progress = stage_progress(session)
+        renderings = rendering_progress(session)
         assumed = assumed_profile(session)
     lines = [f"# {title}", "", f"Counts assume {assumed.describe()}.", "",
              "| stage | seconds | unit | done | pending | failed | rejected |", "|---|---:|---|---:|---:|---:|---:|"]
@@ -73,6 +74,10 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
         seconds = stage_times.get(p.stage)
         shown = f"{seconds:.1f}" if seconds is not None else ""
         lines.append(f"| {p.stage} | {shown} | {p.unit} | {p.done} | {p.pending} | {p.failed} | {p.rejected} |")
+    if renderings:
+        lines += ["", "| rendering | made by | ok | failed | rejected | why rejected |", "|---|---|---:|---:|---:|---|"]
+        lines += [f"| {r.kind} | {r.stage} | {r.ok} | {r.failed} | {r.rejected} | "
+                  f"{r.reasons_text().replace('|', '/')} |" for r in renderings]
     if changes:
         lines += ["", "| fit: parts | candidate set grew | winner changed | won by a new material |",
                   "|---:|---:|---:|---:|",

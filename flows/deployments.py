@@ -123,11 +123,16 @@ def build_deployments(path: Path | None = None, names: Sequence[str] | None = No
     return out
 
 
-def serve(names: Sequence[str] | None = None, limit: int | None = None, path: Path | None = None) -> None:
+def serve(names: Sequence[str] | None = None, limit: int | None = None, path: Path | None = None,
+          keep_schedules: bool = False) -> None:
     """Serve the deployments of prefect.yaml (or of `path`) in this process until interrupted (runs execute
-    in subprocesses). Their schedules are turned into flow runs by the Prefect server's scheduler."""
+    in subprocesses). Their schedules are turned into flow runs by the Prefect server's scheduler.
+
+    Stopping (Ctrl-C, SIGTERM) pauses every deployment served, `nightly` included (Prefect's
+    `pause_on_shutdown`), until the next `serve` un-pauses them; `keep_schedules` leaves them as they
+    were, so the server keeps scheduling runs that wait for the next serving process."""
     from prefect import serve as prefect_serve
 
     if not get_settings().effective_prefect_api_url:
         raise RuntimeError("no Prefect API: start `prefect server start` and set PREFECT_API_URL")
-    prefect_serve(*build_deployments(path, names=names), limit=limit)
+    prefect_serve(*build_deployments(path, names=names), limit=limit, pause_on_shutdown=not keep_schedules)

@@ -106,13 +106,15 @@ def new_materials(profile: ProfileName | None = None, renders_per_material: int 
     with session_scope(url) as session:
         rerun = plan_material_rerun(session, name, sets, renders_per_material)
         before = fit_snapshot(session, rerun.fit_key, rerun.pairs)
-    summary: dict[str, Any] = {"new_materials": rerun.new_ids, "previous_classifier_id": rerun.previous_classifier_id,
+    summary: dict[str, Any] = {"new_materials": rerun.new_ids, "new_material_names": rerun.new_names,
+                               "previous_classifier_id": rerun.previous_classifier_id,
                                "profile": rerun.profile, "overrides": rerun.overrides, "stages": rerun.stages,
                                "pairs": len(rerun.pairs), "fit": rerun.fit_key}
     if not rerun.new_ids:
         get_run_logger().info("new materials: none since classifier %s", rerun.previous_classifier_id)
         return {**summary, "classifier_id": rerun.previous_classifier_id}
-    get_run_logger().info("new materials %s: %s on %d pairs (no retraining) with profile %s %s", rerun.new_ids,
+    get_run_logger().info("new materials %s: %s on %d pairs (no retraining) with profile %s %s",
+                          ", ".join(rerun.new_names),
                           " -> ".join(rerun.stages), len(rerun.pairs), rerun.profile, rerun.overrides)
 
     def changes(stage: str) -> dict[str, Any]:
@@ -131,7 +133,8 @@ def new_materials(profile: ProfileName | None = None, renders_per_material: int 
     rows = [r for r in candidate_rows(method=method) if r["pair_id"] in wanted]
     publish_candidates_table("new-material-candidates", rows, method=method)
     publish_summary("new materials re-run (fit first, no retraining)", times,
-                    {"new materials": rerun.new_ids, "classifier (not retrained)": rerun.previous_classifier_id,
-                     "pairs re-fitted": len(rerun.pairs), "published with": method, "profile": rerun.profile,
+                    {"new materials": ", ".join(rerun.new_names),
+                     "classifier (not retrained)": rerun.previous_classifier_id, "pairs re-fitted": len(rerun.pairs),
+                     "published with": method, "profile": rerun.profile,
                      "overrides": rerun.overrides}, key="new-materials-summary", changes=changed)
     return summary

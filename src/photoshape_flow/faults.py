@@ -2,10 +2,11 @@
 
 `PHOTOSHAPE_FAULT=<point>[:<n>]` makes this process SIGKILL itself the n-th time (default: the
 first) it reaches `fault_point("<point>")`, right after appending the point's name to the file
-`PHOTOSHAPE_FAULT_MARK` (when set), so the harness can assert the run died exactly there. Without
-the variable (every real run) a point is one comparison. The points sit where a kill is most likely
-to leave something half-done: between a blob and its row, between a claim and its first result,
-after a checkpoint, in the middle of an export or a gallery.
+`PHOTOSHAPE_FAULT_MARK` (when set), so the harness can assert the run died exactly there.
+`PHOTOSHAPE_FAULT_SIGNAL=INT` sends SIGINT instead: Ctrl-C at that point (a KeyboardInterrupt the run
+may clean up after). Without the variable (every real run) a point is one comparison. The points sit
+where a kill is most likely to leave something half-done: between a blob and its row, between a
+claim and its first result, after a checkpoint, in the middle of an export or a gallery.
 """
 
 from __future__ import annotations
@@ -51,4 +52,5 @@ def fault_point(name: str) -> None:
             out.write(name + "\n")
             out.flush()
             os.fsync(out.fileno())
-    os.kill(os.getpid(), signal.SIGKILL)
+    interrupt = os.environ.get("PHOTOSHAPE_FAULT_SIGNAL", "KILL").upper() == "INT"
+    os.kill(os.getpid(), signal.SIGINT if interrupt else signal.SIGKILL)

@@ -6,6 +6,11 @@ context. They never know who listens: the CLI draws rich bars in a terminal and 
 lines otherwise (`cli/progress.py`), a flow updates Prefect progress artifacts
 (`flows/artifacts.py`), a test records the calls. `task` names the loop ("publish pairs"), `done`
 counts finished items (0 announces the loop, so its clock starts), `total` is the loop's size.
+
+The stage runner names what a loop works on: `labelled` puts the stage in front of a task that does
+not start with it (`substances: bootstrap renders`), `nested` the batch of a stage that runs in
+batches (`training-renders batch 3/20: training renders`); a sink with a `nested(label)` method (the
+CLI's) is told such loops are inside another, so it can keep them quiet.
 """
 
 from __future__ import annotations
@@ -21,6 +26,23 @@ Progress = Callable[[str, int, int], None]
 
 def no_progress(task: str, done: int, total: int) -> None:
     """The sink of runs nobody watches."""
+
+
+def labelled(progress: Progress, stage: str) -> Progress:
+    """`progress` with `stage` in front of every task that does not already start with it."""
+    def report(task: str, done: int, total: int) -> None:
+        progress(task if task.startswith(stage) else f"{stage}: {task}", done, total)
+
+    return report
+
+
+def nested(progress: Progress, label: str) -> Progress:
+    """The sink of loops inside `label` (one batch of a stage): the sink's own `nested(label)` where it
+    has one, else `progress` with `label: ` in front of every task."""
+    inner = getattr(progress, "nested", None)
+    if callable(inner):
+        return inner(label)  # type: ignore[no-any-return]
+    return lambda task, done, total: progress(f"{label}: {task}", done, total)
 
 
 def counted(progress: Progress | None, task: str, items: Iterable[T], total: int | None = None) -> Iterator[T]:

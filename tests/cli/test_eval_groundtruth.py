@@ -142,6 +142,18 @@ def test_eval_groundtruth_scores_the_good_entries_and_names_each_bad_one(
     out = flat(result.output)
     assert out.index("headline:ours") < out.index("ours(classifier1)") < out.index("color-match")
     assert out.index("color-match") < out.index("everyfigure")
+    # the headline reads at 80 columns; every figure goes to the file it names, one line each
+    named = re.search(r"^every figure \((\d+)\): (\S+)$", result.output, re.M)
+    assert named, result.output
+    headline = result.output[result.output.index("headline: "):named.start()].splitlines()
+    assert all(len(line) <= 80 and "…" not in line for line in headline), headline  # nothing cut or wrapped
+    assert any(re.match(r"color-match +0\.000 +0\.000 .* -1\.000 \[-1\.00,-1\.00\]$", line) for line in headline)
+    text = Path(named.group(2)).read_text()
+    assert Path(named.group(2)).parent.name == "evaluations" and Path(named.group(2)).name == "mine.txt"
+    assert all(len(line) <= 80 for line in text.splitlines())
+    assert "every figure" not in result.output.split(named.group(0))[1]  # the table itself is not printed
+    assert re.search(r"^inference / classifier:1$", text, re.M)
+    assert re.search(r"^  material_top1 +1\.0000 +\d+", text, re.M), text
 
     sha = hashlib.sha256(path.read_bytes()).hexdigest()
     got = figures(any_db_url, "mine")

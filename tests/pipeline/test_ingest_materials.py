@@ -185,3 +185,37 @@ def test_materials_ingested_before_any_envmap_get_previews_later(db_url: str, tm
     assert preview is not None
     again = ingest_materials([folders / "wood_oak"], previews=True)  # present with a preview: nothing redone
     assert again.present and _rows(db_url)["wood_oak"].preview_blob == preview
+
+
+def test_ingest_materials_says_whether_it_announced_the_new_ones(db_url: str, tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Through the real CLI: the new materials by name, and whether the material-added event went out
+    (it is handed to the Prefect API at `_send_event`, the network boundary)."""
+    from typer.testing import CliRunner
+
+    from photoshape_flow.cli import app
+    from photoshape_flow.config import get_settings
+
+    root = make_folders(tmp_path / "mats")
+    monkeypatch.setattr(prefect_events, "_prefect_api_url", lambda: None)
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    monkeypatch.delenv("PHOTOSHAPE_PREFECT_API_URL", raising=False)
+    get_settings.cache_clear()
+    quiet = CliRunner().invoke(app, ["ingest", "materials", str(root / "wood_oak"), "--no-previews"])
+    assert quiet.exit_code == 0, quiet.output
+    name = next(iter(_rows(db_url)))
+    assert f"not announced: 1 new material ({name}); no Prefect API configured" in " ".join(quiet.output.split())
+
+    calls: list[tuple] = []
+    monkeypatch.setattr(prefect_events, "_send_event", lambda *args, **kw: calls.append(args))
+    monkeypatch.setenv("PHOTOSHAPE_PREFECT_API_URL", "http://127.0.0.1:9/api")
+    get_settings.cache_clear()
+    sent = CliRunner().invoke(app, ["ingest", "materials", str(root), "--no-previews"])
+    assert sent.exit_code == 0, sent.output
+    new = sorted(set(_rows(db_url)) - {name})
+    assert len(calls) == 1 and len(new) == 2
+    assert (f"announced 2 new materials ({', '.join(new)}): event {MATERIAL_EVENT} sent to "
+            "http://127.0.0.1:9/api") in " ".join(sent.output.split())
+    again = CliRunner().invoke(app, ["ingest", "materials", str(root), "--no-previews"])
+    assert again.exit_code == 0 and "announced" not in again.output  # nothing new: nothing to announce
+    get_settings.cache_clear()

@@ -41,7 +41,7 @@ def _pair(session, shape_id: int, exemplar_id: int, rank: int):  # type: ignore[
 
 
 def test_rejected_is_counted_apart_from_failed(db_url: str) -> None:
-    from photoshape_flow.pipeline.progress import ingest_progress, training_renders_progress
+    from photoshape_flow.pipeline.progress import ingest_progress, rendering_progress, training_renders_progress
 
     with session_scope(db_url) as session:
         session.add_all([
@@ -52,12 +52,24 @@ def test_rejected_is_counted_apart_from_failed(db_url: str) -> None:
             m.Rendering(kind="training", key="a"),
             m.Rendering(kind="training", key="b", status="rejected", error="part not visible"),
             m.Rendering(kind="bootstrap", key="c", status="rejected"),
+            m.Rendering(kind="bootstrap", key="e", status="rejected", error="saturated fraction 0.250 > 0.05"),
+            m.Rendering(kind="bootstrap", key="f", status="rejected", error="saturated fraction 0.688 > 0.05"),
             m.Rendering(kind="training", key="d", status="failed", error="renderer crashed"),
+            m.Rendering(kind="photoshape", key="1/fit:1/exemplar"),
         ])
     with session_scope(db_url) as session:
         ingest, renders = ingest_progress(session), training_renders_progress(session)
+        kinds = rendering_progress(session)
     assert (ingest.done, ingest.pending, ingest.failed, ingest.rejected) == (1, 0, 1, 2)
-    assert (renders.done, renders.pending, renders.failed, renders.rejected) == (1, 0, 1, 2)
+    # the training round's renders only: the bootstrap round's belong to the substances stage
+    assert (renders.done, renders.pending, renders.failed, renders.rejected) == (1, 0, 1, 1)
+    assert [(k.kind, k.stage, k.ok, k.failed, k.rejected) for k in kinds] == [
+        ("bootstrap", "substances", 0, 0, 3), ("training", "training-renders", 1, 1, 1),
+        ("photoshape", "publish", 1, 0, 0)]
+    # reasons summarised without their numbers, most frequent first, each with one full message
+    assert kinds[0].reasons_text() == ("2 saturated fraction (e.g. saturated fraction 0.250 > 0.05); "
+                                       "1 no reason recorded")
+    assert kinds[1].reasons_text() == "1 part not visible"
 
 
 def test_publish_pending_counts_pairs_up_to_the_last_runs_max_rank(db_url: str) -> None:

@@ -405,3 +405,45 @@ def test_publish_renders_and_exports_the_refined_look_with_a_before_after(db_url
     page = next((tmp_path / "site" / "pairs").glob(f"{good}-*.html")).read_text()
     assert site.published == 1 and "before refinement" in page and "after refinement" in page
     assert "tint 1.50 0.60 0.40" in page and UNREFINED_VIEW not in page  # not listed as a view of its own
+
+
+@pytest.mark.render
+def test_documented_published_query_is_the_gallerys_index_with_its_grades_and_scores(db_url, store, tmp_path):
+    """docs/data-model.md's first example, on what the real publish stage wrote: exactly the PhotoShapes
+    the gallery lists as published, by name, with the grade and Score the gallery shows; another
+    method's PhotoShape of the same pair (the classifier's, unpublished) stays out."""
+    from tests.db.test_data_model_doc import published_query
+
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.pipeline.gallery_site import gallery_data
+    from photoshape_flow.pipeline.grading import record_grade
+    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.store import BlobStore
+
+    ids = seed(db_url, store, tmp_path)
+    run_publish(views=0, size=16, spp=2, formats=("glb",))
+    with session_scope(db_url) as s:
+        fit_rows = s.execute(sa.select(m.Assignment).where(m.Assignment.pair_id == ids["good"],
+                                                           m.Assignment.rank == 1)).scalars().all()
+        for row in fit_rows:  # the classifier's own ranking of the good pair: never published
+            s.add(m.Assignment(pair_id=row.pair_id, part_id=row.part_id, method="classifier",
+                               classifier_id=row.classifier_id, method_key=f"classifier:{row.classifier_id}",
+                               rank=1, material_id=row.material_id, score=0.01, posterior=0.99))
+        fit_rows[1].unobserved = True  # the Score counts the parts seen in the photo
+        s.flush()
+        record_grade(s, ids["good"], "wrong_color", grader="bob")
+        record_grade(s, ids["good"], "good", grader="user")  # the newest grade wins
+        rows = s.execute(sa.text(published_query())).all()
+        entries, _ = gallery_data(s, BlobStore(get_settings().blob_root))
+    published = [e for e in entries if e.published]
+    assert [(r.pair_id, r.shape_name, r.exemplar_name, r.method_key, r.grade) for r in rows] == [
+        (e.pair_id, e.shape_name, e.exemplar_name, e.method_key, e.grade) for e in published]
+    assert [(r.pair_id, r.shape_name, r.exemplar_name, r.grade) for r in rows] == [
+        (ids["good"], "tiny chair", "photo good", "good")]
+    assert [r.score for r in rows] == [pytest.approx(e.score) for e in published] == [pytest.approx(0.8)]
+    assert len(entries) == 2  # the broken pair is a candidate, not published
+    from photoshape_flow.flows.artifacts import candidate_rows
+
+    table = candidate_rows(method="fit")  # the flows' candidates artifact: names, score, published, grade
+    assert [(r["shape_name"], r["exemplar_name"], r["published"], r["grade"], r["score"]) for r in table] == [
+        ("tiny chair", "photo good", True, "good", 0.8), ("tiny chair", "photo broken", False, None, 0.7)]

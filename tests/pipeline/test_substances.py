@@ -62,7 +62,8 @@ def test_substances_stage_end_to_end_and_idempotent(
         col = seed_collection(session, store, exemplar_size=EXEMPLAR)
     hidden_part = _add_alignments(db_url, store, col)
 
-    # a run killed after the first epoch leaves a resumable checkpoint behind
+    # a run interrupted (Ctrl-C) after the first epoch leaves a resumable checkpoint behind, its row
+    # failed rather than "training" (nobody trains it any more)
     from photoshape_flow.pipeline import substances as substance_train  # where train_or_resume finds it
 
     original = substance_train.train_substance_net
@@ -80,7 +81,8 @@ def test_substances_stage_end_to_end_and_idempotent(
     monkeypatch.setattr(substance_train, "train_substance_net", original)
     with session_scope(db_url) as session:
         (partial,) = session.execute(sa.select(m.Classifier)).scalars()
-    assert partial.epoch == 1 and partial.status == "training" and partial.checkpoint_blob
+    assert partial.epoch == 1 and partial.status == "failed" and partial.checkpoint_blob
+    assert partial.error.startswith("KeyboardInterrupt")
 
     summary = run_substances(bootstrap_count=6, size=32, spp=2, train_config="tiny")
     assert summary["bootstrap"]["rendered"] == 0 and summary["bootstrap"]["skipped"] == 6

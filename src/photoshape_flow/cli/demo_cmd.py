@@ -74,7 +74,7 @@ def demo(
         with cli_progress(console) as progress:
             run_name, metrics = run_evaluation(manifest.groundtruth, f"{source}-{time.strftime('%Y%m%d-%H%M%S')}",
                                                exemplar_source=source, on_problem=print_problem, progress=progress)
-        print_metrics(metrics)
+        print_metrics(metrics, run_name)
         console.print(f"evaluation stored as run [bold]{run_name}[/] (table `evaluation`)")
     elapsed = time.perf_counter() - started
     console.print(f"\n[bold]demo finished in {elapsed / 60:.1f} min[/]")

@@ -11,35 +11,47 @@ from rich.table import Table
 
 from photoshape_flow.cli.common import console, fail, require_database
 
+HEADLINE_LINE = ("headline: ours, then each baseline (accuracy per part: top-1, top-5, subst.; per pair: "
+                 "re-render RMSE, SSIM, relit RMSE, lower is better; vs ours: top-1 gap [95% interval])")
+
 
 def print_rows(title: str, rows: Sequence[dict[str, str]]) -> None:
-    """A table of plain-string rows (the headline tables); nothing when there are no rows."""
+    """A borderless table of plain-string rows (the headline tables) that fits 80 columns; nothing
+    when there are no rows."""
     if not rows:
         return
-    table = Table(title=title, title_justify="left")
+    console.print(title, highlight=False)
+    table = Table(box=None, padding=(0, 1, 0, 0), pad_edge=False, show_edge=False, header_style="bold")
     for i, col in enumerate(rows[0]):  # the first column names the row: never cut
-        table.add_column(col, justify="left" if i == 0 else "right", no_wrap=i == 0)
+        table.add_column(col, justify="left" if i == 0 else "right", no_wrap=True)
     for row in rows:
         table.add_row(*row.values())
     console.print(table)
 
 
-def print_metrics(metrics) -> None:  # type: ignore[no-untyped-def]
-    """The headline (ours vs each baseline, the shared stages' main figures), then every figure."""
-    from photoshape_flow.evaluation.tables import HEADLINE_TITLE, STAGES_TITLE, headline_rows, stage_rows
-    from photoshape_flow.pipeline.evaluate import metrics_table
+def figures_file(run: str) -> Path:
+    """Where `eval` writes every figure of `run`: <data_root>/evaluations/<run>.txt."""
+    from photoshape_flow.config import get_settings
 
-    print_rows(f"headline: {HEADLINE_TITLE}", headline_rows(metrics))
-    print_rows(f"headline, {STAGES_TITLE}", stage_rows(metrics))
-    table = Table(title="every figure", title_justify="left")
-    for col in ("stage", "method", "metric", "value", "count", "95% interval"):
-        table.add_column(col, justify="left" if col in ("stage", "method", "metric") else "right", overflow="fold",
-                         no_wrap=col in ("metric", "95% interval"))  # metric names stay whole; stage and method fold
-    for row in metrics_table(metrics):
-        value = "" if row["value"] is None else f"{row['value']:.4f}"
-        count = "" if row["count"] is None else str(row["count"])
-        table.add_row(row["stage"], row["method"], row["metric"], value, count, row["95% interval"])
-    console.print(table)
+    safe = "".join(c if c.isalnum() or c in "-_." else "-" for c in run)
+    return get_settings().data_root / "evaluations" / f"{safe}.txt"
+
+
+def print_metrics(metrics, run: str) -> Path:  # type: ignore[no-untyped-def]
+    """The headline (ours vs each baseline, the shared stages' main figures), then every figure to a
+    file (`figures_file`) whose path is printed; returns it."""
+    from photoshape_flow.evaluation.tables import figures_text, headline_rows, stage_rows
+
+    rows = headline_rows(metrics)
+    for row in rows:  # one line per method: the paired interval in brackets, no wrapping
+        row["vs ours"] = row["vs ours"].replace("(", "[").replace(")", "]").replace(", ", ",")
+    print_rows(HEADLINE_LINE, rows)
+    print_rows("headline, shared stages", stage_rows(metrics))
+    path = figures_file(run)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(figures_text(metrics, f"evaluation run {run}: every figure ({len(metrics)})"))
+    console.print(f"every figure ({len(metrics)}): {path}", highlight=False, soft_wrap=True)
+    return path
 
 
 def print_problem(message: str) -> None:
@@ -56,8 +68,9 @@ def eval_command(
     stage: list[str] = typer.Option(None, "--stage", help="Only these stages (repeatable)."),
     source: str = typer.Option(None, help="Only exemplars of this ingest source (e.g. demo-small)."),
 ) -> None:
-    """Compare pipeline outputs with ground truth; prints a headline and every figure, stores them in
-    `evaluation` (tagged with the file's sha256) and registers the file as the next default."""
+    """Compare pipeline outputs with ground truth; prints a headline, writes every figure to
+    <data_root>/evaluations/<run>.txt, stores them in `evaluation` (tagged with the file's sha256) and
+    registers the file as the next default."""
     require_database()
     from photoshape_flow.pipeline.evaluate import EVAL_STAGES, run_evaluation
     from photoshape_flow.pipeline.groundtruth_registry import resolve_groundtruth
@@ -83,8 +96,8 @@ def eval_command(
                                            on_problem=print_problem, progress=progress)
     except ValueError as exc:
         fail(str(exc))
-    print_metrics(metrics)
-    console.print(f"stored as evaluation run [bold]{name}[/]", highlight=False)
+    print_metrics(metrics, name)
+    console.print(f"stored as evaluation run [bold]{name}[/] (table `evaluation`)", highlight=False)
 
 
 def register(app: typer.Typer) -> None:

@@ -77,6 +77,30 @@ def _progress(title: str) -> Iterator[Callable[[str, int, int], None]]:
         yield update
 
 
+def print_announcement(summary: Any) -> None:
+    """Whether the material-added event went out for the new materials (named), and what follows."""
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.db import models as m
+    from photoshape_flow.db.session import session_scope
+    from photoshape_flow.events import MATERIAL_EVENT
+    from photoshape_flow.masking import mask_password
+
+    settings = get_settings()
+    with session_scope(settings.resolved_database_url) as session:
+        names = [n for (n,) in session.query(m.Material.name).filter(m.Material.id.in_(summary.new_material_ids))
+                 .order_by(m.Material.name)]
+    what = f"{len(names)} new material{'s' if len(names) != 1 else ''} ({shown(', '.join(names))})"
+    if summary.announced:
+        api = shown(mask_password(str(settings.effective_prefect_api_url)))
+        console.print(f"announced {what}: event {MATERIAL_EVENT} sent to {api} "
+                      "(the new-materials deployment re-fits and re-publishes)", highlight=False, soft_wrap=True)
+    else:
+        reason = ("no Prefect API configured" if not settings.effective_prefect_api_url
+                  else "the Prefect API did not take it: see the warning above")
+        console.print(f"[yellow]not announced[/]: {what}; {reason}; run `photoshape new-materials` to re-fit "
+                      "and re-publish for them", highlight=False, soft_wrap=True)
+
+
 def print_summary(summary: Any, allow_rejected: bool = False) -> None:
     """The summary table plus one line per rejection (and warnings), then the exit code.
 
@@ -89,6 +113,8 @@ def print_summary(summary: Any, allow_rejected: bool = False) -> None:
     table.add_row(str(len(summary.added)), str(len(summary.present)), str(len(summary.replaced)),
                   str(len(summary.rejected)))
     console.print(table)
+    if getattr(summary, "announced", None) is not None:
+        print_announcement(summary)
     if summary.duplicates:
         console.print(f"{len(summary.duplicates)} duplicates marked (excluded): "
                       + ", ".join(f"{a} -> {b}" for a, b in summary.duplicates[:20]), highlight=False)

@@ -10,7 +10,14 @@ from __future__ import annotations
 import typer
 from rich.table import Table
 
-from photoshape_flow.cli.common import console, fail, require_database, resolve_profile_or_fail, setup_logging
+from photoshape_flow.cli.common import (
+    console,
+    fail,
+    require_database,
+    resolve_profile_or_fail,
+    setup_logging,
+    shown,
+)
 from photoshape_flow.cli.progress import cli_progress
 from photoshape_flow.profiles import PROFILES
 
@@ -44,7 +51,8 @@ def new_materials(
             return
         if not rerun.fit_key:
             fail("no trained material classifier yet: run `photoshape run all` first")
-        console.print(f"new materials {rerun.new_ids}: {' -> '.join(rerun.stages)} on {len(rerun.pairs)} pair(s), "
+        console.print(f"new materials {shown(', '.join(rerun.new_names))}: {' -> '.join(rerun.stages)} "
+                      f"on {len(rerun.pairs)} pair(s), "
                       f"profile {rerun.profile}", highlight=False)
         reports, changes = run_material_rerun(rerun, ctx)
     print_reports(reports, title="material-added re-run")

@@ -1,10 +1,12 @@
 """How the CLI shows the stages' progress (`progress_sink.Progress`): rich bars or plain lines.
 
-In a terminal each long loop gets a rich bar with its count, elapsed time and ETA. When stdout is
-not a terminal (a log file, CI, a pipe) bars would be noise, so each loop prints a plain line at
-its start, after its first item, at each tenth (at most one a second), at least every
-`every_seconds` seconds while items finish, and at its end:
-`publish pairs: 12/40 (30%), 0.8/s, ETA 0:35`.
+Each loop gets one line that says what it works on: `training-renders batch 3/20: training renders`
+(the stage runner names the stage and the batch, `progress_sink.nested`). In a terminal that line is
+a rich bar (count, elapsed, ETA) updated in place; a loop inside a batch disappears when it ends. When
+stdout is not a terminal (a log file, CI, a pipe) bars would be noise, so the sink prints plain lines,
+at most one every `every_seconds` while loops run and one at the end of each loop (a loop nested in
+a batch prints its end only when it ran long enough to have printed before):
+`publish pairs: 40/40 (100%), 0.8/s, took 0:50`.
 """
 
 from __future__ import annotations
@@ -27,59 +29,79 @@ from rich.progress import (
 from photoshape_flow.progress_sink import Progress as ProgressSink
 from photoshape_flow.progress_sink import progress_line
 
+LOG_EVERY_SECONDS = 10.0  # off a terminal: at most one running line this often (ends always print)
+
 
 @dataclass
 class _Loop:
     started: float
-    printed_at: float
-    printed_done: int
+    done: int
+    nested: bool
+    printed: bool = False  # a running line was printed for it
 
 
 class PlainProgress:
-    """The non-terminal sink: per loop a line at its start, after its first item (the first ETA),
-    each time it crosses a tenth (`every_items` items if set) but at most one per `min_seconds`,
-    at least one per `every_seconds` while items finish, and at its end. The clock is injectable."""
+    """The non-terminal sink: one line at the end of each loop, and while loops run at most one line
+    per `every_seconds` in all (for the loop that reported; none before it ran `every_seconds`). A
+    nested loop (`nested(label)`: one batch of a stage) prints its end only when it printed while
+    running, so a stage of many quick batches prints its batch loop, not each batch. The clock is
+    injectable."""
 
-    def __init__(self, write: Callable[[str], None], every_items: int = 0, every_seconds: float = 10.0,
-                 min_seconds: float = 1.0, clock: Callable[[], float] = time.monotonic):
-        self.write, self.every_items, self.clock = write, every_items, clock
-        self.every_seconds, self.min_seconds = every_seconds, min_seconds
+    def __init__(self, write: Callable[[str], None], every_seconds: float = LOG_EVERY_SECONDS,
+                 clock: Callable[[], float] = time.monotonic):
+        self.write, self.clock, self.every_seconds = write, clock, every_seconds
         self.loops: dict[str, _Loop] = {}
+        self.last_line = clock()
 
     def __call__(self, task: str, done: int, total: int) -> None:
+        self.report(task, done, total, nested=False)
+
+    def nested(self, label: str) -> ProgressSink:
+        """The sink of loops inside `label` (a batch of a stage): `label: task`, quiet when quick."""
+        return lambda task, done, total: self.report(f"{label}: {task}", done, total, nested=True)
+
+    def report(self, task: str, done: int, total: int, nested: bool) -> None:
         now = self.clock()
         loop = self.loops.get(task)
-        if loop is None or done < loop.printed_done:  # a new loop (or the same task run again)
-            self.loops[task] = _Loop(now, now, done)
-            if total or done:  # an empty loop says nothing
-                self.write(progress_line(task, done, total, 0.0))
+        if loop is None or done < loop.done or (done == 0 and loop.done == 0):  # a new loop (or run again)
+            self.loops[task] = _Loop(now, done, nested)
             return
-        if done == loop.printed_done:
+        if done == loop.done:
             return  # nothing new (a repeated report, or the end printed already)
-        step = self.every_items or max(total // 10, 1)
-        since = now - loop.printed_at
-        due = (
-            (total > 0 and done >= total)
-            or loop.printed_done == 0
-            or (done // step > loop.printed_done // step and since >= self.min_seconds)
-            or since >= self.every_seconds
-        )
-        if due:
-            loop.printed_at, loop.printed_done = now, done
-            self.write(progress_line(task, done, total, now - loop.started))
+        loop.done = done
+        if total > 0 and done >= total:
+            if not loop.nested or loop.printed:
+                self._print(progress_line(task, done, total, now - loop.started), now)
+            return
+        if now - self.last_line >= self.every_seconds and now - loop.started >= self.every_seconds:
+            loop.printed = True
+            self._print(progress_line(task, done, total, now - loop.started), now)
+
+    def _print(self, line: str, now: float) -> None:
+        self.last_line = now
+        self.write(line)
 
 
 class RichProgress:
-    """The terminal sink: one rich bar per loop (count, elapsed, ETA), removed when the block ends."""
+    """The terminal sink: one rich bar per loop (count, elapsed, ETA), updated in place; a nested loop's
+    bar is removed when it ends, the others when the block ends."""
 
     def __init__(self, bar: Progress):
         self.bar = bar
         self.tasks: dict[str, object] = {}
 
     def __call__(self, task: str, done: int, total: int) -> None:
+        self.report(task, done, total, nested=False)
+
+    def nested(self, label: str) -> ProgressSink:
+        return lambda task, done, total: self.report(f"{label}: {task}", done, total, nested=True)
+
+    def report(self, task: str, done: int, total: int, nested: bool) -> None:
         if task not in self.tasks:
             self.tasks[task] = self.bar.add_task(task, total=total or None)
         self.bar.update(self.tasks[task], completed=done, total=total or None)  # type: ignore[arg-type]
+        if nested and total and done >= total:
+            self.bar.remove_task(self.tasks.pop(task))  # type: ignore[arg-type]
 
 
 @contextmanager

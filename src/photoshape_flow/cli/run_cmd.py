@@ -112,7 +112,34 @@ def run(
             resolved, ctx, names=None if stage == "all" else [stage], wait=wait,
             on_stage=lambda r: console.print(f"[green]done[/] {r.stage} ({r.seconds:.1f} s)")))
     print_reports(reports)
+    print_announcement(reports)
+    if any(r.stage == "publish" for r in reports):
+        print_outputs(ctx)
     exit_if_inputs_rejected(reports)
+
+
+def print_announcement(reports: Sequence[StageReport]) -> None:
+    """Whether ingest announced the materials it added (the material-added event), when it added any."""
+    from photoshape_flow.events import MATERIAL_EVENT
+
+    for r in reports:
+        materials = r.details.get("materials") if r.stage == "ingest" and isinstance(r.details, dict) else None
+        if not isinstance(materials, dict) or "announced" not in materials:
+            continue
+        added = materials.get("added", 0)
+        console.print(f"ingest: {added} new material{'s' if added != 1 else ''} " + (
+            f"announced ({MATERIAL_EVENT} sent)" if materials["announced"] else
+            f"not announced (no Prefect API configured, or it did not answer): {MATERIAL_EVENT} not sent"),
+            highlight=False, soft_wrap=True)
+
+
+def print_outputs(ctx: Any) -> None:
+    """Where publish's results are: the gallery's index page and the exports folder."""
+    from photoshape_flow.pipeline.downloads import exports_root
+    from photoshape_flow.stages.publish import gallery_dir
+
+    console.print(f"gallery:  {gallery_dir(ctx) / 'index.html'}", highlight=False, soft_wrap=True)
+    console.print(f"exports:  {exports_root(ctx.settings)}", highlight=False, soft_wrap=True)
 
 
 def exit_if_inputs_rejected(reports: Sequence[StageReport]) -> None:

@@ -17,8 +17,15 @@ def serve(
                                     "the stage registry and exit."),
     declarations: Path | None = typer.Option(None, "--declarations", help="Serve the deployments of this "
                                              "prefect.yaml instead of the project's (e.g. with other schedules)."),
+    keep_schedules: bool = typer.Option(False, "--keep-schedules", help="On stopping, leave the deployments "
+                                        "as they were (default: pause them all, nightly included, until the "
+                                        "next serve)."),
 ) -> None:
     """Serve every deployment of prefect.yaml (schedules, the material-added trigger) until Ctrl-C.
+
+    Stopping pauses every deployment served, nightly included, until the next `photoshape serve`
+    un-pauses them; --keep-schedules leaves them active (the server keeps scheduling their runs, which
+    wait for a serving process).
 
     Needs a Prefect server: `prefect server start` (SQLite) or with
     PREFECT_SERVER_DATABASE_CONNECTION_URL=postgresql+asyncpg://..., and PREFECT_API_URL pointing at it.
@@ -43,7 +50,10 @@ def serve(
         fail(f"{declarations}: no such file")
     deployments = build_deployments(declarations, names=names or None)
     console.print(f"serving {len(deployments)} deployments: {', '.join(d.name for d in deployments)}")
-    serve_deployments(names or None, limit=limit, path=declarations)
+    console.print("stopping (Ctrl-C) " + ("leaves their schedules as they are" if keep_schedules else
+                  "pauses them all, nightly included, until the next `photoshape serve` (--keep-schedules: "
+                  "leave them active)"), highlight=False, soft_wrap=True)
+    serve_deployments(names or None, limit=limit, path=declarations, keep_schedules=keep_schedules)
 
 
 def register(app: typer.Typer) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from photoshape_flow.cli.common import console, require_database, shown_database_url
@@ -16,7 +17,7 @@ def status() -> None:
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import claims
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.progress import assumed_profile, table_counts
+    from photoshape_flow.pipeline.progress import assumed_profile, rendering_progress, table_counts
     from photoshape_flow.pipeline.runs import mark_dead_runs
     from photoshape_flow.stages import stage_progress
 
@@ -25,6 +26,7 @@ def status() -> None:
     with session_scope() as session:
         mark_dead_runs(session)  # a killed run is counted as died, never as running
         stages = stage_progress(session)
+        renderings = rendering_progress(session)
         tables = table_counts(session)
         assumed = assumed_profile(session)
         holds = claims.holds(session)
@@ -37,6 +39,14 @@ def status() -> None:
     for p in stages:
         st.add_row(*(str(getattr(p, col)) for col in STAGE_COLUMNS))
     console.print(st)
+    if renderings:
+        rt = Table(title="renderings, by the stage that made them")
+        for col in ("kind", "stage", "ok", "failed", "rejected", "why rejected"):
+            rt.add_column(col, justify="right" if col in ("ok", "failed", "rejected") else "left",
+                          overflow="fold")
+        for r in renderings:
+            rt.add_row(r.kind, r.stage, str(r.ok), str(r.failed), str(r.rejected), escape(r.reasons_text()))
+        console.print(rt)
     tt = Table(title="tables")
     tt.add_column("table")
     tt.add_column("rows", justify="right")

@@ -123,3 +123,30 @@ def stage_rows(metrics: Sequence[Any]) -> list[dict[str, str]]:
         rows.append({"figure": "substance network", "value": fmt(subs["part_substance_accuracy"]),
                      "over": over(n, "parts")})
     return rows
+
+
+FIGURES_LEGEND = ("value: the figure; n: how many it is over (parts, pairs or exemplars); 95% interval: "
+                  "bootstrap over exemplars (`<metric>_vs_ours`: paired, that method minus ours)")
+
+
+def figures_text(metrics: Sequence[Any], title: str) -> str:
+    """Every figure as plain text that reads at 80 columns: a heading per stage and method, then one
+    line per metric (name, value, count, 95% interval), the headline's legend on top."""
+    lines = [title, "", *_wrapped(f"headline: {HEADLINE_TITLE}"), "", *_wrapped(f"headline, {STAGES_TITLE}"), "",
+             *_wrapped(FIGURES_LEGEND), ""]
+    width = max([len(x.metric) for x in metrics] + [6])
+    heading = None
+    for x in metrics:
+        if (x.stage, x.method) != heading:
+            heading = (x.stage, x.method)
+            lines += ["", f"{x.stage} / {x.method}", f"  {'metric':<{width}} {'value':>9} {'n':>6}  95% interval"]
+        interval = "" if x.low is None or x.high is None else f"{x.low:.3f} to {x.high:.3f}"
+        count = "" if x.count is None else str(x.count)
+        lines.append(f"  {x.metric:<{width}} {fmt(x.value, 4):>9} {count:>6}  {interval}".rstrip())
+    return "\n".join(lines) + "\n"
+
+
+def _wrapped(text: str, width: int = 80) -> list[str]:
+    import textwrap
+
+    return textwrap.wrap(text, width)

@@ -50,6 +50,7 @@ class IngestSummary:
     duplicates: list[tuple[int, int]] = field(default_factory=list)  # exemplars: (id, duplicate of id)
     warnings: list[tuple[str, str]] = field(default_factory=list)
     skipped: list[tuple[str, str]] = field(default_factory=list)  # informational (e.g. previews)
+    announced: bool | None = None  # materials: whether the material-added event went out; None: nothing to tell
 
     @property
     def new_material_ids(self) -> list[int]:

@@ -148,8 +148,8 @@ def ingest_materials(
                 license=license, attribution=attribution, limits=limits, seen=seen))
         if progress is not None:
             progress(label, done, len(folders))
-    if events is not None:
-        events.materials_added(summary.new_material_ids)
+    if events is not None and summary.new_material_ids:
+        summary.announced = bool(events.materials_added(summary.new_material_ids))
     # previews for this batch, and for materials still without one (e.g. ingested before any envmap)
     pending = (summary.added + summary.replaced
                + [i for i in materials_without_preview(url) if i in summary.present]) if previews else []

@@ -111,6 +111,7 @@ class MaterialRerun:
     stages: list[str] = field(default_factory=list)
     pairs: list[int] = field(default_factory=list)  # items of every stage in `stages` (all are per pair)
     fit_key: str | None = None  # `fit:<classifier id>`: the rows the run's changed-parts counts compare
+    new_names: list[str] = field(default_factory=list)  # the new materials' names (`new_ids` order), for people
 
 
 def plan_material_rerun(session: Session, profile: str, overrides: Sequence[str] = (),
@@ -128,6 +129,7 @@ def plan_material_rerun(session: Session, profile: str, overrides: Sequence[str]
     previous_id = previous.id if previous is not None else None
     if not new_ids:
         return MaterialRerun([], previous_id, profile, list(overrides))
+    names = dict(session.execute(sa.select(m.Material.id, m.Material.name).where(m.Material.id.in_(new_ids))).all())
     prof = resolve_profile(profile, list(overrides)).profile
     extra = renders_per_material * len(new_ids)
     counts = {
@@ -140,4 +142,5 @@ def plan_material_rerun(session: Session, profile: str, overrides: Sequence[str]
 
     fit_key, pairs = affected_pairs(session)
     return MaterialRerun(new_ids, previous_id, profile, kept + [f"{k}={v}" for k, v in counts.items()],
-                         rerun_stages(REGISTRY, "material", "triggered"), pairs, fit_key)
+                         rerun_stages(REGISTRY, "material", "triggered"), pairs, fit_key,
+                         [str(names.get(i, i)) for i in new_ids])

@@ -9,7 +9,8 @@ it assumes the profile of the newest recorded run (`assumed_profile`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
@@ -143,9 +144,71 @@ def substances_progress(session: Session) -> StageProgress:
 
 
 def training_renders_progress(session: Session) -> StageProgress:
-    renders = sa.select(m.Rendering.id).where(m.Rendering.kind.in_(("bootstrap", "training")))
+    """The training round's renders only: the bootstrap round's are the substances stage's
+    (`rendering_progress` counts every kind under the stage that made it)."""
+    renders = sa.select(m.Rendering.id).where(m.Rendering.kind == "training")
     ok, failed, rejected = _by_outcome(session, renders, m.Rendering.status)
     return StageProgress("training-renders", "renderings", ok, 0, failed, rejected)
+
+
+# the stage that makes each kind of rendering (`vocab.RENDERING_KINDS`)
+RENDERING_STAGE = {
+    "preview": "ingest", "part-map": "fine-alignment", "bootstrap": "substances", "training": "training-renders",
+    "photoshape": "publish", "builtin": "publish", "exemplar-gt": "demo",
+}
+REASON_EXAMPLES = 3  # rejection reasons listed per kind of rendering (the most frequent)
+
+
+@dataclass(frozen=True)
+class RenderingProgress:
+    """One kind of rendering: the stage that made it, its rows by outcome, and why renders were rejected
+    (`reasons`: (reason, count, one full message), most frequent first)."""
+
+    kind: str
+    stage: str
+    ok: int
+    failed: int
+    rejected: int
+    reasons: list[tuple[str, int, str]] = field(default_factory=list)
+
+    def reasons_text(self) -> str:
+        """"3 saturated fraction (e.g. saturated fraction 0.688 > 0.05)", joined by "; "."""
+        return "; ".join(f"{n} {reason} (e.g. {example})" if example != reason else f"{n} {reason}"
+                         for reason, n, example in self.reasons)
+
+
+def rejection_reason(error: str | None) -> str:
+    """A rejection message without its numbers, so rejections of one cause group together:
+    "saturated fraction 0.688 > 0.05" -> "saturated fraction"."""
+    text = (error or "no reason recorded").strip()
+    head = re.split(r"\s*[-+]?\d", text, maxsplit=1)[0].strip(" :,;=(")
+    return head or text
+
+
+def rendering_progress(session: Session) -> list[RenderingProgress]:
+    """Every kind of rendering recorded, under the stage that made it, with rejection reasons summarised."""
+    counts: dict[str, dict[str, int]] = {}
+    for kind, status, n in session.execute(
+        sa.select(m.Rendering.kind, m.Rendering.status, sa.func.count()).group_by(m.Rendering.kind, m.Rendering.status)
+    ):
+        counts.setdefault(str(kind), {})[str(status)] = int(n)
+    reasons: dict[str, dict[str, list]] = {}
+    for kind, error, n in session.execute(
+        sa.select(m.Rendering.kind, m.Rendering.error, sa.func.count())
+        .where(m.Rendering.status == STATUS_REJECTED).group_by(m.Rendering.kind, m.Rendering.error)
+    ):
+        entry = reasons.setdefault(str(kind), {}).setdefault(rejection_reason(error), [0, error or ""])
+        entry[0] += int(n)
+    order = {kind: i for i, kind in enumerate(RENDERING_STAGE)}
+    out = []
+    for kind in sorted(counts, key=lambda k: (order.get(k, len(order)), k)):
+        by_status = counts[kind]
+        ok, rejected = by_status.get(STATUS_OK, 0), by_status.get(STATUS_REJECTED, 0)
+        top = sorted(reasons.get(kind, {}).items(), key=lambda item: (-item[1][0], item[0]))[:REASON_EXAMPLES]
+        out.append(RenderingProgress(kind, RENDERING_STAGE.get(kind, kind), ok,
+                                     sum(by_status.values()) - ok - rejected, rejected,
+                                     [(reason, n, example or reason) for reason, (n, example) in top]))
+    return out
 
 
 def training_progress(session: Session) -> StageProgress:

@@ -36,7 +36,29 @@ def mark_dead_runs(session: Session) -> list[int]:
         row.status, row.finished_at = DIED, utcnow()
         row.error = (f"its process ({row.holder_host}:{row.holder_pid}) ended without finishing the run "
                      "(killed, or out of memory)")
+    session.flush()
+    settle_orphan_training(session)
     return [row.id for row in dead]
+
+
+def settle_orphan_training(session: Session) -> int:
+    """Mark `failed` every classifier still `training` while no run is running; returns how many.
+
+    Training happens inside a run, and a run that ends (ok, failed, interrupted) marks its classifier
+    ok or failed; only a process killed outright (SIGKILL, out of memory) leaves a row `training`, which
+    `status` and the Prefect summary then reported as pending after every later successful run. With
+    no run left running nobody is training it. The row keeps its checkpoint: the next run with the
+    same inputs resumes from it, as from any failed row.
+    """
+    from photoshape_flow.db.base import utcnow
+
+    if session.execute(sa.select(m.PipelineRun.id).where(m.PipelineRun.status == "running").limit(1)).first():
+        return 0
+    result = session.execute(
+        sa.update(m.Classifier).where(m.Classifier.status == "training")
+        .values(status="failed", updated_at=utcnow(),
+                error="interrupted: its run ended without finishing it (the next run resumes from its checkpoint)"))
+    return int(getattr(result, "rowcount", 0) or 0)
 
 
 def last_run(session: Session) -> m.PipelineRun | None:

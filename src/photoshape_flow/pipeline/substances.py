@@ -177,7 +177,7 @@ def train_or_resume(
 
     try:
         result = train_substance_net(train, val if len(val) else None, config, checkpoint=checkpoint, on_epoch=save)
-    except Exception as exc:
+    except BaseException as exc:  # Ctrl-C too: never left "training" (a re-run resumes from the checkpoint)
         with session_scope(url) as session:
             session.execute(
                 sa.update(m.Classifier)

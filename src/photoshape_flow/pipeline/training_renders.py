@@ -317,7 +317,7 @@ def run_training_renders(
     with session_scope(url) as session:
         pools = load_pools(session, round, val_fraction)
     per_split = split_counts(count, pools, val_fraction)
-    for warning in pools.warnings:
+    for warning in pools.warnings if indices is None or 0 in indices else ():  # once a round, not per batch
         log.warning("%s round: %s", round, warning)
 
     keys = [(split, item_key(round, split, i)) for split in SPLITS for i in range(per_split[split])]

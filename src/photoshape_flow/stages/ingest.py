@@ -72,6 +72,7 @@ def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None)
             rejected=len(summary.rejected),
             details={name: {"added": len(summary.added), "present": len(summary.present),
                             "replaced": len(summary.replaced),
-                            "rejected": [f"{path}: {reason}" for path, reason in summary.rejected]}},
+                            "rejected": [f"{path}: {reason}" for path, reason in summary.rejected],
+                            **({"announced": summary.announced} if summary.announced is not None else {})}},
         ))
     return report

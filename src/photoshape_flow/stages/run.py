@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 from sqlalchemy.orm import Session
@@ -29,6 +30,7 @@ from photoshape_flow.faults import fault_point
 from photoshape_flow.pipeline.progress import StageProgress
 from photoshape_flow.pipeline.runs import mark_dead_runs
 from photoshape_flow.profiles import Profile, ResolvedProfile, resolve_profile
+from photoshape_flow.progress_sink import counted, labelled, nested
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.registry import REGISTRY, Stage, get_stage
 from photoshape_flow.stages.report import Blocked, StageReport, blocked_by
@@ -76,13 +78,14 @@ def run_stage(name: str, profile: str | Profile | ResolvedProfile, ctx: StageCon
     stage = get_stage(name)
     resolved = _resolved(profile)
     log.info("stage %s (profile %s) starting", name, resolved.name)
+    named = replace(ctx, progress=labelled(ctx.progress, name))  # its loops' lines name the stage
     if isinstance(work, WorkUnit):
-        report = process(name, work, resolved, ctx)
+        report = process(name, work, resolved, named)
     elif stage.fans_out:
         report = _timed(lambda: _fan_out_here(stage, resolved, ctx))
     else:
         cfg = stage.config(resolved.profile)
-        report = _timed(lambda: _exclusively(name, name, ctx, lambda: stage.run(ctx, cfg, work)))
+        report = _timed(lambda: _exclusively(name, name, named, lambda: stage.run(named, cfg, work)))
     log.info("stage %s finished in %.1f s: %d done, %d skipped, %d failed, %d rejected, %d blocked", name,
              report.seconds, report.done, report.skipped, report.failed, report.rejected, report.blocked.count)
     return report
@@ -90,13 +93,23 @@ def run_stage(name: str, profile: str | Profile | ResolvedProfile, ctx: StageCon
 
 def _fan_out_here(stage: Stage, resolved: ResolvedProfile, ctx: StageContext) -> StageReport:
     """Every planned unit claimed and processed one after another, then the finishing step, unless items
-    are blocked: the finishing step would see partial results (the holder's own run finishes after them)."""
+    are blocked: the finishing step would see partial results (the holder's own run finishes after them).
+
+    Progress: several units are one loop (`<stage> batches`), each unit's own loops nested in it
+    (`<stage> batch 3/20: training renders`); a single unit's loops are named by the stage alone.
+    """
     report = StageReport(stage.name)
-    for unit in plan_batches(stage.name, resolved, ctx):
-        report = report.merge(process(stage.name, unit, resolved, ctx))
+    named = replace(ctx, progress=labelled(ctx.progress, stage.name))
+    units = plan_batches(stage.name, resolved, ctx)
+    if len(units) == 1:
+        report = report.merge(process(stage.name, units[0], resolved, named))
+    else:
+        for k, unit in enumerate(counted(ctx.progress, f"{stage.name} batches", units), start=1):
+            batch = replace(ctx, progress=nested(ctx.progress, f"{stage.name} batch {k}/{len(units)}"))
+            report = report.merge(process(stage.name, unit, resolved, batch))
     if report.blocked.count:
         return report
-    finished = finish(stage.name, resolved, ctx)
+    finished = finish(stage.name, resolved, named)
     return report if finished is None else report.merge(finished)
 
 
@@ -228,14 +241,18 @@ def process(name: str, unit: WorkUnit, profile: str | Profile | ResolvedProfile,
     mine = tuple(int(k) for k in won)
     if not mine:
         return StageReport(name, skipped=len(unit.ids) - blocked.count, blocked=blocked)
-    fault_point("claimed-before-result")
     try:
+        fault_point("claimed-before-result")
         with Heartbeat(ctx.database_url, lease):
             report = _timed(lambda: stage.run(ctx, cfg, WorkUnit(unit.part, mine)))
     except Exception as exc:
         with ctx.session() as session:
             for key in won:
                 claims.fail(session, claim_stage, key, f"{type(exc).__name__}: {exc}")
+        raise
+    except BaseException:  # Ctrl-C, a stop: the items go back unclaimed, never left `claimed` by this run
+        with ctx.session() as session:
+            claims.release(session, claim_stage, won)
         raise
     with ctx.session() as session:
         claims.complete(session, claim_stage, won)
