@@ -50,8 +50,6 @@ def settle_orphan_training(session: Session) -> int:
     no run left running nobody is training it. The row keeps its checkpoint: the next run with the
     same inputs resumes from it, as from any failed row.
     """
-    from photoshape_flow.db.base import utcnow
-
     if session.execute(sa.select(m.PipelineRun.id).where(m.PipelineRun.status == "running").limit(1)).first():
         return 0
     result = session.execute(
