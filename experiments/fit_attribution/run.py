@@ -15,6 +15,7 @@ weights of the classifier's calibration):
     gt-both    both
     gt-both-distance  both, ranked by the rendered comparison alone (no ranking prior): what the
                distance itself knows
+    fit-distance      the stage's light and part map, ranked without the prior: what the prior adds
 
 and the table gives material top-1 and substance accuracy per scored part (a part scored as
 `photoshape eval` scores it, against the CRF map) with 95% bootstrap intervals over exemplars, the
@@ -56,7 +57,7 @@ from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, resolve_classif
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.store import BlobStore
 
-CONDITIONS = ("fit", "gt-light", "gt-envmap", "gt-mask", "gt-both", "gt-both-distance")
+CONDITIONS = ("fit", "fit-distance", "gt-light", "gt-envmap", "gt-mask", "gt-both", "gt-both-distance")
 Observations = dict[str, dict[str, dict[int, list[float]]]]  # condition -> figure -> exemplar -> values
 
 
@@ -138,7 +139,8 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
     # (data, envmap, starting exposure): the truth's light starts from exposure 1 (its scale is the
     # photo's); the truth's envmap at a searched rotation from the search's exposure; the rounds re-solve it
     runs: dict[str, tuple[PairData, Any, float]] = {"fit": (data, None, float(light.get("exposure", 1.0)))}
-    distance_only = {"gt-both-distance"}
+    runs["fit-distance"] = runs["fit"]
+    distance_only = {"fit-distance", "gt-both-distance"}
     if gt_env is not None:
         runs["gt-light"] = (data, gt_env, 1.0)
         runs["gt-envmap"] = (data, *searched(ctx, data, gt_env))

@@ -120,7 +120,8 @@ class FitConfig:
     highlight_weight: float = 0.0  # L* 90th/99th percentiles above the median (gloss); the calibration may
     #                                raise it (hand-set 0: fitted to 0 on the small demo's validation renders, D38)
     deep_weight: float = 0.0  # backbone texture moments (`fit.deep_texture`); the calibration may raise it (D54)
-    texture_backbone: str = "efficientnet-lite0"  # the backbone the deep term reads frames with ("none": no term)
+    texture_backbone: str = "none"  # the backbone the deep term reads frames with, e.g. "efficientnet-lite0";
+    #                                 "none": no term, no read (measured level on both worlds: D54)
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
     # refinement of the winners (`fit.refine`, docs/decisions.md D35): only for the pairs publish uses

@@ -68,3 +68,39 @@ def test_feature_maps_are_deterministic(maps: FeatureMaps) -> None:
     image = _stripes(True)
     first, second = maps.maps(image), FeatureMaps("efficientnet-lite0").maps(image)
     assert all(np.array_equal(x, y) for x, y in zip(first, second, strict=True))
+
+
+def test_the_fit_measures_the_deep_term_once_per_render_and_it_picks_the_grain(maps: FeatureMaps) -> None:
+    """A photo of vertical stripes; two candidate renders of the same colours, one striped the same way,
+    one across: the colour terms tie, the deep term (read once per render, whatever the exposure grid)
+    ranks the right one first. Without a backbone the deep column is 0."""
+    from photoshape_flow.fit import lighting as lt
+    from photoshape_flow.fit.appearance import Weights
+    from photoshape_flow.fit.candidates import Candidate
+    from photoshape_flow.fit.scene import CandidateRenders, FitScene, profiled_terms
+
+    mask = _region()
+    ids = np.where(mask, 1, 0).astype(np.int32)
+    photo = _stripes(True)
+    linear = lt.photo_linear((photo * 255 + 0.5).astype(np.uint8))
+    reads: list[int] = []
+
+    def counted(image: np.ndarray) -> list[np.ndarray]:
+        reads.append(1)
+        return maps.maps(image)
+
+    renders = [np.concatenate([lt.photo_linear((image * 255 + 0.5).astype(np.uint8)), np.ones((SIZE, SIZE, 1))],
+                              axis=-1).astype(np.float32) for image in (_stripes(True, shift=2), _stripes(False))]
+    plan = CandidateRenders(renders, {1: {7: 0, 8: 1}}, ids)
+    candidates = {1: [Candidate(7, "wood", 0.5, "ranking"), Candidate(8, "wood", 0.5, "ranking")]}
+    grid = (0.84, 1.0, 1.19)
+    for features, deep_weight in ((counted, 1.0), (None, 0.0)):
+        scene = FitScene(None, None, linear, to_lab(lt.exposed_srgb(linear, 1.0)), {1: mask}, features=features)
+        measured, _, _ = profiled_terms(plan, scene, candidates, 1.0, Weights(deep=deep_weight), 0.0, grid)
+        right, across = measured[1][7], measured[1][8]
+        assert right is not None and across is not None
+        if features is None:
+            assert right[4] == across[4] == 0.0
+        else:
+            assert right[4] < 0.5 * across[4], (right, across)
+            assert len(reads) == 1 + len(renders)  # the photo once, each render once (not per exposure)
