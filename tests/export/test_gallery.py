@@ -133,3 +133,46 @@ def test_a_part_shows_its_posterior_not_the_raw_score(tmp_path):
     write_gallery(tmp_path / "site", [entry], [])
     page = (tmp_path / "site" / "pairs" / "1-classifier-1.html").read_text()
     assert "82.0%" in page and "40.0%" in page and "3.0%" not in page
+
+
+def _minimal_glb(path: Path) -> Path:
+    """A whole GLB (header, one JSON chunk): enough for the gallery to ship it to the 3D view."""
+    chunk = b'{"asset":{"version":"2.0"}}'
+    chunk += b" " * (-len(chunk) % 4)
+    body = len(chunk).to_bytes(4, "little") + b"JSON" + chunk
+    path.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(body)).to_bytes(4, "little") + body)
+    return path
+
+
+def test_gallery_ships_the_3d_viewer_and_requests_nothing_outside(tmp_path):
+    """The 3D view works offline: the viewer (model-viewer, Apache-2.0) and the GLB are in the site's folder,
+    and no page or script of ours names an external URL (the only http(s) link is a licence's source)."""
+    import re
+
+    from photoshape_flow.export.gallery import VIEWER_ASSET, VIEWER_LICENSE, VIEWER_PACKAGE
+    from photoshape_flow.export.node_tools import ProgramMissing, require_package
+
+    try:
+        require_package("@google/model-viewer")  # npm ci installs it (a set-up error where node is there)
+    except ProgramMissing as exc:
+        pytest.skip(str(exc))
+    entries, materials = _entries(tmp_path)
+    entries[1].downloads["glb"] = _minimal_glb(tmp_path / "export" / "real.glb")
+    write_gallery(tmp_path / "site", entries, materials)
+    site = tmp_path / "site"
+    shipped = site / VIEWER_ASSET
+    assert shipped.read_bytes() == (VIEWER_PACKAGE / "dist" / "model-viewer-umd.min.js").read_bytes()
+    assert "Apache License" in (site / VIEWER_LICENSE).read_text()
+    assert '"version": "4.4.0"' in (VIEWER_PACKAGE / "package.json").read_text()
+    page = (site / "pairs" / "2-classifier-1.html").read_text()
+    assert '<model-viewer id="viewer"' in page and f'<script src="../{VIEWER_ASSET}"></script>' in page
+    model = re.search(r'<script src="\.\./(models/[0-9a-f]+\.js)"></script>', page)
+    assert model and (site / model.group(1)).read_text().startswith(
+        'window.photoshapeModel="data:model/gltf-binary;base64,Z2xURg')
+    assert "<model-viewer" not in (site / "pairs" / "1-classifier-1.html").read_text()  # no whole GLB: no view
+    assert re.search(r'<td class="num">\d+ B</td>', page)  # downloads with their sizes
+    for path in site.rglob("*"):
+        if path.suffix in (".html", ".js", ".css") and path != shipped:
+            text = path.read_text().replace('href="https://example.org/chair"', "")
+            assert not re.search(r"(https?:)?//[a-z0-9]", text, re.I), path  # nothing loads from elsewhere
+            assert not re.search(r'(src|href)="(?!\.\./|[a-z]+/|[a-z0-9_-]+\.html|#|data:,")', text), path

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -186,14 +188,42 @@ def test_gallery_of_published_candidates(db_url, store, tmp_path):
     good_page = next(p for p in pages if p.name.startswith(f"{ids['good']}-"))
     text = good_page.read_text()
     assert "seat a bit dark" in text and "oak_01" in text and "80.0%" in text and "photoshape.glb" in text
+    site = tmp_path / "site"
+    assert "<model-viewer" in text and "../assets/model-viewer-umd.min.js" in text  # the 3D view, shipped
     try:
-        report = check_pages([index, good_page, tmp_path / "site" / "candidates.html"],
-                             screenshot=tmp_path / "gallery.png")
+        report = check_pages([good_page, index, site / "candidates.html"], screenshot=tmp_path / "gallery-3d.png",
+                             screenshot_selector="model-viewer", evaluate=[VIEWER_LOADED, ENLARGE, CLOSE])
     except ProgramMissing as exc:
         pytest.skip(str(exc))
-    assert problems(report) == []
+    assert problems(report) == []  # no console error, no failed or external request (the viewer's too)
     # exemplar, built-in, exemplar view and one turntable view
-    assert len(report["pages"][1]["images"]) == 4
+    assert len(report["pages"][0]["images"]) == 4
+    loaded, enlarged, closed = report["pages"][0]["evaluated"]
+    assert loaded["loaded"] and loaded["visible"] and loaded["src"].startswith("data:model/gltf-binary"), loaded
+    assert enlarged["open"] and enlarged["width"] > 500 and enlarged["src"] == enlarged["clicked"], enlarged
+    assert closed is False
+    assert (tmp_path / "gallery-3d.png").stat().st_size > 1000
+    if os.environ.get("PHOTOSHAPE_DOCS_SCREENSHOT"):  # refresh docs/images/gallery-3d.png
+        shutil.copyfile(tmp_path / "gallery-3d.png", os.environ["PHOTOSHAPE_DOCS_SCREENSHOT"])
+
+
+# wait for the <model-viewer> element's `load` event (or its error), then for the model on screen
+VIEWER_LOADED = """new Promise((resolve) => {
+  const v = document.querySelector('model-viewer');
+  const state = (why) => ({why, loaded: v.loaded, visible: v.modelIsVisible, src: String(v.src).slice(0, 40)});
+  const poll = (t0) => (v.modelIsVisible || Date.now() - t0 > 30000)
+    ? resolve(state('load')) : setTimeout(() => poll(t0), 100);
+  v.addEventListener('error', (e) => resolve(state('error ' + (e.detail && e.detail.type))));
+  if (v.loaded) poll(Date.now()); else v.addEventListener('load', () => poll(Date.now()));
+  setTimeout(() => resolve(state('timeout')), 60000);
+})"""
+# click a render: the lightbox opens with that image, large
+ENLARGE = """(() => {
+  const img = document.querySelectorAll('img.zoom')[2]; img.click();
+  const box = document.getElementById('lightbox'), big = box.querySelector('img');
+  return {open: box.open, width: big.getBoundingClientRect().width, src: big.src, clicked: img.src};
+})()"""
+CLOSE = "(document.getElementById('lightbox').click(), document.getElementById('lightbox').open)"
 
 
 def test_export_command_writes_downloads_and_reports_failures(db_url, store, tmp_path):

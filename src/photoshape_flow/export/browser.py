@@ -23,9 +23,11 @@ def check_pages(
     evaluate: Sequence[str] = (),
     viewport: tuple[int, int] = (1280, 900),
     timeout: float = 180.0,
+    screenshot_selector: str | None = None,
 ) -> dict[str, Any]:
-    """Load each page; `evaluate` expressions run on the first page (results in ``evaluated``),
-    then the first page is screenshotted (full page) to `screenshot`. Raises `NodeToolsMissing`."""
+    """Load each page; `evaluate` expressions run on the first page (results in ``evaluated``; an
+    expression's promise is awaited), then the first page is screenshotted to `screenshot`: the full
+    page, or the first element matching `screenshot_selector`. Raises `NodeToolsMissing`."""
     require_package("playwright-core")
     config = {
         "executable": chromium_executable(),
@@ -33,6 +35,7 @@ def check_pages(
         "screenshot": str(Path(screenshot).resolve()) if screenshot else None,
         "viewport": list(viewport),
         "evaluate": list(evaluate),
+        "screenshot_selector": screenshot_selector,
     }
     with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as handle:
         json.dump(config, handle)

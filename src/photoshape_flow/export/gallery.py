@@ -11,14 +11,23 @@ Layout::
     index.html              the published PhotoShapes (those with a render), sortable by score, HOG
                             distance, alignment IoU, grade
     candidates.html         the candidates without a render yet, each with the command that renders it
-    pairs/<slug>.html       exemplar, built-in render, PhotoShape renders, parts, downloads, licences
+    pairs/<slug>.html       3D view of the GLB, exemplar, built-in render, PhotoShape renders (click to
+                            enlarge), parts, downloads with sizes, licences
     materials.html          the materials used, with substance, licence and how often they were chosen
     img/                    images, named by content hash
+    models/<hash>.js        each GLB as a data: URL in a classic script, so the 3D view loads from disk
+                            too (a file:// page may not fetch(), but may load a script)
+    assets/                 the 3D viewer, @google/model-viewer (Apache-2.0; its UMD build, which a
+                            file:// page can load, unlike a module script) with its LICENSE
     downloads/<slug>/       single-file formats and assignment.json as they are, zips of the others
+
+The viewer is copied from ``export/node/node_modules`` (`npm ci`, pinned in package-lock.json); where
+it is not installed the pages show the renders without the 3D view.
 """
 
 from __future__ import annotations
 
+import base64
 import hashlib
 import math
 import shutil
@@ -30,10 +39,14 @@ from typing import Any
 
 from photoshape_flow.export.bundle import format_files
 from photoshape_flow.export.formats import EXPORTERS, SIDECAR, SIDECAR_PATH
+from photoshape_flow.export.node_tools import NODE_DIR
 from photoshape_flow.export.templating import render
 from photoshape_flow.faults import fault_point
 
 INDEX_PAGE, CANDIDATES_PAGE = "index.html", "candidates.html"
+# the 3D viewer shipped with the site (`npm ci` installs it; pinned in export/node/package-lock.json)
+VIEWER_PACKAGE = NODE_DIR / "node_modules" / "@google" / "model-viewer"
+VIEWER_ASSET, VIEWER_LICENSE = "assets/model-viewer-umd.min.js", "assets/model-viewer.LICENSE.txt"
 
 GRADE_ORDER: dict[str, int] = {
     "good": 0, "acceptable": 1, "not_sure": 2, "limitation": 3, "wrong_ambiguous": 4, "wrong_color": 5,
@@ -160,6 +173,44 @@ class _Assets:
         return self.copied[source]
 
 
+def human_size(size: int) -> str:
+    """A file size as people read it: 812 B, 14.2 KB, 3.1 MB (powers of 1000)."""
+    value = float(size)
+    for unit in ("B", "KB", "MB", "GB"):
+        if value < 1000 or unit == "GB":
+            return f"{int(value)} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+        value /= 1000
+    raise AssertionError("unreachable")
+
+
+def copy_viewer(root: Path) -> str | None:
+    """Copy the 3D viewer and its licence into the site; its site path, or None where not installed."""
+    source = VIEWER_PACKAGE / "dist" / "model-viewer-umd.min.js"
+    if not source.is_file():
+        return None
+    for rel, path in ((VIEWER_ASSET, source), (VIEWER_LICENSE, VIEWER_PACKAGE / "LICENSE")):
+        if path.is_file():
+            (root / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, root / rel)
+    return VIEWER_ASSET
+
+
+def _model_script(root: Path, glb: Path | None) -> str | None:
+    """`models/<hash>.js`: the GLB as a data: URL in a classic script (``window.photoshapeModel``)."""
+    if glb is None or not Path(glb).is_file():
+        return None
+    data = Path(glb).read_bytes()
+    if len(data) < 20 or data[:4] != b"glTF" or int.from_bytes(data[8:12], "little") != len(data):
+        return None  # not a whole GLB (magic, then its length in the header)
+    rel = f"models/{hashlib.sha256(data).hexdigest()[:20]}.js"
+    target = root / rel
+    if not target.exists():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        encoded = base64.b64encode(data).decode("ascii")  # base64: nothing that can end the string
+        target.write_text(f'window.photoshapeModel="data:model/gltf-binary;base64,{encoded}";\n', encoding="ascii")
+    return rel
+
+
 def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
     """Copy a single-file download, or zip what a multi-file format needs (`bundle.format_files`);
     returns the site path."""
@@ -195,17 +246,19 @@ def write_gallery(
     root = Path(out_dir)
     (root / "pairs").mkdir(parents=True, exist_ok=True)
     assets = _Assets(root)
+    viewer = copy_viewer(root)
     rows: list[dict[str, Any]] = []
     usage: dict[int, int] = {}
     for entry in entries:
         for part in entry.parts:
             if part.material_id is not None:
                 usage[part.material_id] = usage.get(part.material_id, 0) + 1
-        _write_pair_page(root, entry, assets)
+        _write_pair_page(root, entry, assets, viewer)
         rows.append({
             "entry": entry,
             "thumb": assets.image(entry.renders[0][1]) if entry.renders else None,
             "exemplar": assets.image(entry.exemplar_image),
+            "builtin": assets.image(entry.builtin_image),
             "grade_rank": GRADE_ORDER.get(entry.grade or "", 99),
         })
     published = [row for row in rows if row["entry"].published]
@@ -220,20 +273,22 @@ def write_gallery(
     return root / INDEX_PAGE
 
 
-def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets) -> None:
+def _write_pair_page(root: Path, entry: GalleryEntry, assets: _Assets, viewer: str | None = None) -> None:
     images = [(entry.exemplar_image, "exemplar photo"), (entry.builtin_image, "built-in materials"),
               *((path, f"PhotoShape, {view} view") for view, path in entry.renders)]
     figures = [(src, caption) for path, caption in images if (src := assets.image(path)) is not None]
     downloads = [
-        (href, label) for fmt, label in DOWNLOAD_LABELS.items()
+        (href, label, human_size((root / href).stat().st_size)) for fmt, label in DOWNLOAD_LABELS.items()
         if fmt in entry.downloads and (href := _download(root, entry.slug, fmt, entry.downloads[fmt]))
     ]
+    model = _model_script(root, entry.downloads.get("glb")) if viewer else None
     after = dict(entry.renders).get("exemplar")
     before_after = [(src, caption) for path, caption in (
         (entry.exemplar_image, "exemplar photo"), (entry.unrefined_image, "before refinement"),
         (after, "after refinement")) if (src := assets.image(path)) is not None] if entry.unrefined_image else []
     page = render("gallery_pair.html", title=f"PhotoShape {entry.pair_id}: {entry.shape_name}", root="../",
-                  e=entry, figures=figures, downloads=downloads, before_after=before_after)
+                  e=entry, figures=figures, downloads=downloads, before_after=before_after,
+                  viewer=viewer if model else None, model=model)
     (root / "pairs" / f"{entry.slug}.html").write_text(page, encoding="utf-8")
     fault_point("gallery-writing")
 

@@ -3,7 +3,8 @@
 // Usage: node check_pages.mjs CONFIG.json   (prints one JSON report on stdout)
 // CONFIG: {"executable": "/usr/bin/chromium", "pages": ["/abs/index.html", ...],
 //          "screenshot": "/abs/shot.png" | null, "viewport": [1280, 900],
-//          "evaluate": ["js expression run on the first page after load", ...]}
+//          "evaluate": ["js expression run on the first page after load (a promise is awaited)", ...],
+//          "screenshot_selector": "css selector: screenshot that element instead of the full page" | null}
 import { readFile } from 'node:fs/promises';
 import { pathToFileURL } from 'node:url';
 import { chromium } from 'playwright-core';
@@ -14,7 +15,9 @@ const browser = await chromium.launch({
   executablePath: config.executable ?? '/usr/bin/chromium',
   headless: true,
   args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
-         '--disable-component-update', '--no-first-run'],
+         '--disable-component-update', '--no-first-run',
+         // WebGL (the gallery's 3D view) on the CPU: no GPU in CI, and Chromium no longer falls back silently
+         '--enable-unsafe-swiftshader', '--use-angle=swiftshader'],
 });
 const report = { browser: browser.version(), pages: [] };
 try {
@@ -35,7 +38,7 @@ try {
     entry.ok = response === null || response.ok();
     entry.title = await page.title();
     entry.images = await page.evaluate(async () => {
-      const images = Array.from(document.images);
+      const images = Array.from(document.images).filter((img) => img.hasAttribute('src'));  // a lightbox's empty img is not broken
       await Promise.all(images.map((img) => (img.complete ? null : img.decode().catch(() => null))));
       return images.map((img) => ({ src: img.getAttribute('src'), natural_width: img.naturalWidth,
                                     natural_height: img.naturalHeight }));
@@ -45,7 +48,9 @@ try {
     if (index === 0) {
       entry.evaluated = [];
       for (const expression of config.evaluate ?? []) entry.evaluated.push(await page.evaluate(expression));
-      if (config.screenshot) await page.screenshot({ path: config.screenshot, fullPage: true });
+      if (config.screenshot && config.screenshot_selector) {
+        await page.locator(config.screenshot_selector).first().screenshot({ path: config.screenshot });
+      } else if (config.screenshot) await page.screenshot({ path: config.screenshot, fullPage: true });
     }
     report.pages.push(entry);
     await page.close();
