@@ -39,7 +39,7 @@ from photoshape_flow.fit.validation import misalign, resampled, sample_misalignm
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.pipeline.validation_photos import as_photo, exemplar_size, validation_renders
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -212,7 +212,7 @@ def choose_substance_bn_prior(settings: Settings, network_id: int, network: Any,
 def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | None, count: int,
                       read: Callable[[float | None, list[PhotoCase]], Readings],
                       kinds: tuple[str, ...] = ("training", "bootstrap")) -> dict[str, Any]:
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     url = settings.resolved_database_url
     with session_scope(url) as session:
         row = session.get(m.Classifier, network_id)

@@ -40,7 +40,7 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.bn_prior import choose_bn_prior
 from photoshape_flow.pipeline.substances import substance_temperature
 from photoshape_flow.pipeline.training import load_material_classifier, stored_bn_prior, training_data
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -125,7 +125,7 @@ def substance_networks(session: Session) -> list[int]:
 
 def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
     """Fit (or confirm the cached) colour sigma of a material classifier and every substance temperature."""
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     with session_scope(settings.resolved_database_url) as session:
         classifier = session.get(m.Classifier, classifier_id)
         if classifier is None:
@@ -149,7 +149,7 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     and the ECE (`classify.reliability`), stored in the classifier's `metrics` and keyed by the
     checkpoint, the renders and the sigma, so a re-run of training that changes none reads them back.
     """
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     url = settings.resolved_database_url
     row, model = load_material_classifier(classifier_id, settings)
     with session_scope(url) as session:

@@ -38,9 +38,9 @@ from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.render import Renderer
 from photoshape_flow.render.camera import Camera
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -176,7 +176,7 @@ def run_fine_alignment(
     """
     settings = settings or get_settings()
     params = params or FineParams()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     url = settings.resolved_database_url
     start = time.perf_counter()
     with session_scope(url) as session:
@@ -194,7 +194,7 @@ def run_fine_alignment(
         "up_to_date": len(candidates) - len(pending), "aligned": 0, "failed": 0, "failures": [],
     }
     if pending and renderer is None:
-        renderer = Renderer()
+        renderer = default_renderer()
     meshes = _MeshCache(store)
     ious: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
     seconds: list[float] = []
@@ -259,7 +259,7 @@ def evaluate_fine_alignment(
     IoU. Means are over pairs.
     """
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     truths = exemplar_records(groundtruth)
     root = getattr(groundtruth, "root", None)
     rows = session.execute(

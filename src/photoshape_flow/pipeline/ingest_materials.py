@@ -49,7 +49,8 @@ from photoshape_flow.pipeline.ingest_common import (
     resolve_settings,
     store_for,
 )
-from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec, Renderer
+from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec
+from photoshape_flow.render.factory import default_renderer
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED
 
 logger = logging.getLogger(__name__)
@@ -292,7 +293,7 @@ def render_material_previews(
         summary.skipped.append(("previews", reason))
         return summary
     try:
-        renderer = Renderer()
+        renderer = default_renderer()
     except Exception as exc:
         reason = f"renderer unavailable ({one_line(exc)})"
         logger.info("material previews skipped: %s", reason)

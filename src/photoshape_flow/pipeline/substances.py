@@ -56,7 +56,7 @@ from photoshape_flow.pipeline.bn_prior import choose_substance_bn_prior
 from photoshape_flow.pipeline.training import load_material_classifier, run_training, stored_bn_prior
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.progress_sink import Progress, counted, no_progress
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS
 
 log = logging.getLogger(__name__)
@@ -115,7 +115,7 @@ def train_or_resume(
     """Train the substance network (or resume / reuse it); returns (classifier_id, model, info)."""
     set_torch_threads(settings.torch_threads)
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     device = resolve_device(settings.device)
     base = train_config if isinstance(train_config, SubstanceTrainConfig) else get_config(train_config)
     config = replace(base, device=device, seed=settings.seed, **overrides)
@@ -245,7 +245,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
     a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
     """
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     with session_scope(url) as session:
         row = session.get(m.Classifier, classifier_id)
         if row is None or row.kind != "substance" or not row.checkpoint_blob:
@@ -305,7 +305,7 @@ def assign_part_substances(
     (`classify.bn_adapt`, chosen by `pipeline.bn_prior`; None: as trained).
     """
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     summary = {"pairs": 0, "updated": 0, "skipped": 0, "failed": 0, "parts": 0, "unobserved": 0, "errors": []}
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, classifier_id)

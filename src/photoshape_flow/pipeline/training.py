@@ -51,7 +51,7 @@ from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, no_progress
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
 log = logging.getLogger(__name__)
@@ -175,7 +175,7 @@ def load_material_classifier(
             if row.status != STATUS_OK or not row.checkpoint_blob:
                 raise LookupError(f"classifier {classifier_id}: status {row.status}, not usable")
         session.expunge(row)
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     return row, load_classifier(store.read_bytes(row.checkpoint_blob), device=device or settings.device,
                                 bn_prior=stored_bn_prior(row))
 
@@ -251,7 +251,7 @@ def run_training(
     settings = settings or get_settings()
     cfg = config if isinstance(config, ClassifierConfig) else get_config(config, **(overrides or {}))
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     set_torch_threads(settings.torch_threads)
 
     with session_scope(url) as session:

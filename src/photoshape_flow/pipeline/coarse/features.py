@@ -32,8 +32,8 @@ from photoshape_flow.pipeline.coarse.viewpoint_sets import (
 )
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.render import renderer as render_module
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ def compute_view_features(
         expected = {sid: view_feature_hash(config, vpset, blob) for sid, blob in shapes}
     pending = _pending(shapes, existing, expected, limit)
     if pending and renderer is None:
-        renderer = render_module.Renderer()
+        renderer = default_renderer()
     def shard(item: Sequence[Any]) -> dict[str, Any]:
         item_start = time.perf_counter()
         mesh = ShapeMesh.from_npz_bytes(store.read_bytes(item[1]))
@@ -148,7 +148,7 @@ def compute_exemplar_features(
 def _step_inputs(config: CoarseConfig | None, settings: Settings | None) -> tuple[CoarseConfig, BlobStore, str]:
     """A step's configuration (the default when None), blob store and database URL."""
     settings = settings or get_settings()
-    return config or CoarseConfig(), BlobStore(settings.blob_root), settings.resolved_database_url
+    return config or CoarseConfig(), default_store(settings), settings.resolved_database_url
 
 
 def _restricted(query: sa.Select[Any], model: Any, ids: Sequence[int] | None, category: str | None) -> sa.Select[Any]:

@@ -45,7 +45,7 @@ from photoshape_flow.pipeline.coarse.viewpoint_sets import (
     exemplar_feature_hash,
     view_feature_hash,
 )
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import default_store
 
 DROPPED_REASON = "coarse-alignment: no longer among the shape's top exemplars"
 
@@ -76,7 +76,7 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
     """
     config = config or CoarseConfig()
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     url = settings.resolved_database_url
     start = time.perf_counter()
     scan_time = utcnow()
