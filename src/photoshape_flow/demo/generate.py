@@ -49,6 +49,7 @@ from photoshape_flow.demo.writing import write_bytes, write_text
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec
 from photoshape_flow.vocab import SUBSTANCES
 
@@ -242,7 +243,7 @@ def _material_spec(folder: Path, recipe: MaterialRecipe):
 
 
 def render_exemplar(
-    renderer,
+    renderer: RendererProtocol,
     furniture: Furniture,
     plan: ExemplarPlan,
     material_dirs: dict[str, Path],
@@ -281,7 +282,7 @@ def generate_demo(
     size: DemoSize = "tiny",
     seed: int = 0,
     *,
-    renderer=None,
+    renderer: RendererProtocol | None = None,
     preset: SizePreset | None = None,
     source: str | None = None,
 ) -> DemoManifest:

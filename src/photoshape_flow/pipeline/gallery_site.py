@@ -113,11 +113,11 @@ class GallerySite(NamedTuple):
     waiting: int
 
 
-def write_gallery_site(out_dir: str | Path, method: str | None = None,
-                       settings: Settings | None = None, progress: Progress | None = None) -> GallerySite:
+def write_gallery_site(out_dir: str | Path, method: str | None = None, settings: Settings | None = None,
+                       progress: Progress | None = None, store: BlobStore | None = None) -> GallerySite:
     """Gather the candidates from the database and write the static gallery."""
     settings = settings or get_settings()
-    store = default_store(settings)
+    store = store if store is not None else default_store(settings)
     with session_scope(settings.resolved_database_url) as session:
         entries, materials = gallery_data(session, store, method, settings, progress)
     index = write_gallery(out_dir, entries, materials)

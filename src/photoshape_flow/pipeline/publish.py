@@ -62,6 +62,7 @@ from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, writing_stage
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -109,14 +110,15 @@ def run_publish(
     floor: bool = False,
     formats: Sequence[str] = DEFAULT_FORMATS,
     export: bool = True,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> PublishSummary:
     """Render and export every candidate of `method` (all pairs, or `pair_ids`); resumable, idempotent."""
     settings = settings or get_settings()
     formats = parse_formats(list(formats))
     url = settings.resolved_database_url
-    store = default_store(settings)
+    store = store if store is not None else default_store(settings)
     summary = PublishSummary(method=method or DEFAULT_PUBLISH_METHOD)
     with session_scope(url) as session:
         todo = candidate_method_keys(session, method, pair_ids)

@@ -49,6 +49,7 @@ from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
 from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
@@ -296,9 +297,10 @@ def run_training_renders(
     *,
     val_fraction: float = VAL_FRACTION,
     saturation_threshold: float = SATURATION_THRESHOLD,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     indices: Sequence[int] | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """Render `count` items of `round` (resumable, idempotent); returns a summary dict.
 
@@ -313,7 +315,7 @@ def run_training_renders(
         raise ValueError(f"round must be one of {ROUNDS}, got {round!r}")
     settings = settings or get_settings()
     url = settings.resolved_database_url
-    store = default_store(settings)
+    store = store if store is not None else default_store(settings)
     with session_scope(url) as session:
         pools = load_pools(session, round, val_fraction)
     per_split = split_counts(count, pools, val_fraction)

@@ -18,6 +18,7 @@ from photoshape_flow.pipeline.coarse.config import CoarseConfig
 from photoshape_flow.pipeline.coarse.reverse_index import load_reverse_index
 from photoshape_flow.pipeline.coarse.viewpoint_sets import config_viewpoint_set
 from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import default_store
 
 
@@ -26,7 +27,7 @@ def evaluate_coarse_alignment(
     groundtruth: Any,
     *,
     config: CoarseConfig | None = None,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     iou_size: int = 128,
 ) -> dict[str, Any]:
     """Shape recall, pose error and silhouette IoU of the reverse index against demo ground truth.
