@@ -43,10 +43,9 @@ def setup_logging(verbose: bool) -> None:
 
 
 def get_store():  # type: ignore[no-untyped-def]
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.store import BlobStore
+    from photoshape_flow.store import default_store
 
-    return BlobStore(get_settings().blob_root)
+    return default_store()
 
 
 def shown_database_url() -> str:

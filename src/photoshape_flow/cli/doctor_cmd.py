@@ -109,7 +109,7 @@ def check_blob_store() -> Check:
     """Where blobs live; a URL store is listed with its credentials masked and probed once."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.masking import mask_password
-    from photoshape_flow.store import BlobStore, is_url
+    from photoshape_flow.store import default_store, is_url
 
     settings = get_settings()
     root = settings.blob_root
@@ -119,7 +119,7 @@ def check_blob_store() -> Check:
     hint = "set PHOTOSHAPE_BLOB_ROOT to a reachable URL; fsspec reads credentials from the protocol's usual " \
            "places (AWS_* variables, ~/.aws, GOOGLE_APPLICATION_CREDENTIALS) or FSSPEC_<PROTOCOL>_<OPTION>"
     try:
-        BlobStore(root).exists("0" * 64 + ".bin")  # one round trip: reachable, credentials accepted
+        default_store(settings).exists("0" * 64 + ".bin")  # one round trip: reachable, credentials accepted
     except ImportError as exc:
         return Check("blob store", False, f"{shown}: {mask_password(str(exc))}",
                      "install the protocol's fsspec package (s3fs, gcsfs, adlfs)")

@@ -45,7 +45,7 @@ def retrieve(
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.pipeline.calibration import stored_color_prior
     from photoshape_flow.pipeline.training import load_material_classifier
-    from photoshape_flow.store import BlobStore
+    from photoshape_flow.store import default_store
 
     if crop not in ("image", "mask"):
         fail(f"--crop must be 'image' or 'mask', got {crop!r}")
@@ -71,7 +71,7 @@ def retrieve(
         fail(str(exc))
     material_probs, substance_probs = model.predict(photo, masks, crop=crop)  # type: ignore[arg-type]
     with session_scope(settings.resolved_database_url) as session:
-        prior = stored_color_prior(session, BlobStore(settings.blob_root), model.materials,
+        prior = stored_color_prior(session, default_store(settings), model.materials,
                                    session.get(Classifier, row.id)) if color_prior else None
     evidence = ClassifierEvidence.for_classifier(model, row.config, color_prior=prior)
     # with crop="mask" the head sees the region enlarged: its size in the photo does not matter

@@ -47,8 +47,9 @@ from photoshape_flow.demo.obj import mtl_text, obj_text
 from photoshape_flow.demo.seeding import child_rng
 from photoshape_flow.demo.writing import write_bytes, write_text
 from photoshape_flow.hashing import stable_hash
-from photoshape_flow.render import Renderer
 from photoshape_flow.render.camera import Camera
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec
 from photoshape_flow.vocab import SUBSTANCES
 
@@ -242,7 +243,7 @@ def _material_spec(folder: Path, recipe: MaterialRecipe):
 
 
 def render_exemplar(
-    renderer,
+    renderer: RendererProtocol,
     furniture: Furniture,
     plan: ExemplarPlan,
     material_dirs: dict[str, Path],
@@ -281,7 +282,7 @@ def generate_demo(
     size: DemoSize = "tiny",
     seed: int = 0,
     *,
-    renderer=None,
+    renderer: RendererProtocol | None = None,
     preset: SizePreset | None = None,
     source: str | None = None,
 ) -> DemoManifest:
@@ -394,7 +395,7 @@ def generate_demo(
             visible = list(old["visible_parts"])
         else:
             if renderer is None:
-                renderer = Renderer()
+                renderer = default_renderer()
             jpeg, mask = render_exemplar(
                 renderer, furniture, plan, material_dirs, recipe_by_name, held_paths[plan.envmap["name"]]
             )

@@ -39,7 +39,7 @@ from photoshape_flow.fit.validation import misalign, resampled, sample_misalignm
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.pipeline.training import load_material_classifier
 from photoshape_flow.pipeline.validation_photos import as_photo, exemplar_size, validation_renders
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -162,9 +162,10 @@ def choose(losses: dict[float | None, np.ndarray], groups: np.ndarray, draws: in
     return best
 
 
-def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS) -> dict[str, Any]:
+def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS,
+                    store: BlobStore | None = None) -> dict[str, Any]:
     """Choose (or read back) the material classifier's prior; returns {"bn_prior", "log_loss", "regions"}."""
-    row, model = load_material_classifier(classifier_id, settings)
+    row, model = load_material_classifier(classifier_id, settings, store=store)
     with session_scope(settings.resolved_database_url) as session:
         enabled = set(session.execute(sa.select(m.Material.id).where(m.Material.enabled)).scalars())
 
@@ -172,7 +173,7 @@ def choose_bn_prior(settings: Settings, classifier_id: int, count: int = RENDERS
         model.bn_prior = prior
         return material_readings(model, cases, enabled)
 
-    return _choose_and_store(settings, classifier_id, row.checkpoint_blob, count, readings)
+    return _choose_and_store(settings, classifier_id, row.checkpoint_blob, count, readings, store=store)
 
 
 def substance_readings(network: Any, size: int, cases: list[PhotoCase], substance_of: dict[int, str],
@@ -194,7 +195,7 @@ def substance_readings(network: Any, size: int, cases: list[PhotoCase], substanc
 
 
 def choose_substance_bn_prior(settings: Settings, network_id: int, network: Any, size: int,
-                              count: int = RENDERS) -> dict[str, Any]:
+                              count: int = RENDERS, store: BlobStore | None = None) -> dict[str, Any]:
     """Choose (or read back) a substance network's prior, as `choose_bn_prior` does for the classifier."""
     with session_scope(settings.resolved_database_url) as session:
         row = session.get(m.Classifier, network_id)
@@ -206,13 +207,14 @@ def choose_substance_bn_prior(settings: Settings, network_id: int, network: Any,
 
     # the bootstrap round's renders only: those are what exist when the stage first chooses, so a
     # re-run after the training round's renders exist reads the same ones and keeps the choice
-    return _choose_and_store(settings, network_id, checkpoint, count, readings, kinds=("bootstrap",))
+    return _choose_and_store(settings, network_id, checkpoint, count, readings, kinds=("bootstrap",), store=store)
 
 
 def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | None, count: int,
                       read: Callable[[float | None, list[PhotoCase]], Readings],
-                      kinds: tuple[str, ...] = ("training", "bootstrap")) -> dict[str, Any]:
-    store = BlobStore(settings.blob_root)
+                      kinds: tuple[str, ...] = ("training", "bootstrap"),
+                      store: BlobStore | None = None) -> dict[str, Any]:
+    store = store if store is not None else default_store(settings)
     url = settings.resolved_database_url
     with session_scope(url) as session:
         row = session.get(m.Classifier, network_id)

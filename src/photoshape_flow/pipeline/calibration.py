@@ -40,7 +40,7 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.bn_prior import choose_bn_prior
 from photoshape_flow.pipeline.substances import substance_temperature
 from photoshape_flow.pipeline.training import load_material_classifier, stored_bn_prior, training_data
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -123,9 +123,9 @@ def substance_networks(session: Session) -> list[int]:
     ).scalars())
 
 
-def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
+def calibrate(settings: Settings, classifier_id: int, store: BlobStore | None = None) -> dict[str, Any]:
     """Fit (or confirm the cached) colour sigma of a material classifier and every substance temperature."""
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     with session_scope(settings.resolved_database_url) as session:
         classifier = session.get(m.Classifier, classifier_id)
         if classifier is None:
@@ -133,13 +133,14 @@ def calibrate(settings: Settings, classifier_id: int) -> dict[str, Any]:
         labs = material_labs(session, store, [int(x) for x in classifier.materials if int(x) != 0])
         sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
         networks = substance_networks(session)
-    temperatures = {str(n): substance_temperature(settings, n) for n in networks}
-    bn_prior = choose_bn_prior(settings, classifier_id)
+    temperatures = {str(n): substance_temperature(settings, n, store) for n in networks}
+    bn_prior = choose_bn_prior(settings, classifier_id, store=store)
     return {"color_sigma": sigma, "substance_temperatures": temperatures, "bn_prior": bn_prior,
-            "posterior": posterior_reliability(settings, classifier_id)}
+            "posterior": posterior_reliability(settings, classifier_id, store=store)}
 
 
-def posterior_reliability(settings: Settings, classifier_id: int, limit: int = POSTERIOR_RENDERS) -> dict[str, Any]:
+def posterior_reliability(settings: Settings, classifier_id: int, limit: int = POSTERIOR_RENDERS,
+                          store: BlobStore | None = None) -> dict[str, Any]:
     """Reliability of the ranking's posterior on the validation renders' material regions (cached).
 
     Each region (at least the classifier's smallest training region) is ranked as inference ranks an
@@ -149,9 +150,9 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     and the ECE (`classify.reliability`), stored in the classifier's `metrics` and keyed by the
     checkpoint, the renders and the sigma, so a re-run of training that changes none reads them back.
     """
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     url = settings.resolved_database_url
-    row, model = load_material_classifier(classifier_id, settings)
+    row, model = load_material_classifier(classifier_id, settings, store=store)
     with session_scope(url) as session:
         data = training_data(session, store)
         classifier = session.get(m.Classifier, classifier_id)

@@ -25,6 +25,7 @@ from photoshape_flow.pipeline.coarse.evaluation import evaluate_coarse_alignment
 from photoshape_flow.pipeline.coarse.features import compute_exemplar_features, compute_view_features
 from photoshape_flow.pipeline.coarse.pairs import compute_pairs
 from photoshape_flow.pipeline.coarse.reverse_index import load_reverse_index
+from photoshape_flow.render.protocol import RendererProtocol
 
 log = logging.getLogger(__name__)
 
@@ -36,7 +37,7 @@ def run_coarse_alignment(
     batch: int | None = None,
     *,
     config: CoarseConfig | None = None,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
 ) -> dict[str, Any]:
     """Features of up to `batch` pending shapes and exemplars (all when None), then the pairs."""
     config = config or CoarseConfig()

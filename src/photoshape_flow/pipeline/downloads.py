@@ -29,7 +29,7 @@ from photoshape_flow.pipeline.photoshapes import (
 )
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
 log = logging.getLogger(__name__)
@@ -91,7 +91,7 @@ def export_candidates(
     """
     settings = settings or get_settings()
     formats = parse_formats(list(formats))
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     url = settings.resolved_database_url
     with session_scope(url) as session:
         todo = candidate_method_keys(session, method, pair_ids)

@@ -52,7 +52,7 @@ from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth
 from photoshape_flow.pipeline.relighting_eval import RelightingScores
 from photoshape_flow.pipeline.rerender_eval import RerenderScores, rendered_variants
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -360,7 +360,7 @@ def run_evaluation(
     instead of scoring them here.
     """
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     gt = read_groundtruth_file(groundtruth)
     run = run or dt.datetime.now(dt.UTC).strftime("eval-%Y%m%d-%H%M%S")
     stages = set(stages)
@@ -417,7 +417,7 @@ def score_batch(groundtruth: str | Path, exemplar_ids: Sequence[int], *, exempla
                 rerender_max_pairs: int | None = None) -> Scores:
     """The inference observations of some matched exemplars (one batch of the evaluate flow)."""
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     gt = read_groundtruth_file(groundtruth)
     wanted = {int(i) for i in exemplar_ids}
     with session_scope(settings.resolved_database_url) as session:

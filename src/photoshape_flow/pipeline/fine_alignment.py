@@ -38,9 +38,10 @@ from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.render import Renderer
 from photoshape_flow.render.camera import Camera
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +111,7 @@ class _MeshCache:
 
 
 def _align_item(
-    item: Mapping[str, Any], params: FineParams, store: BlobStore, renderer: Any, meshes: _MeshCache
+    item: Mapping[str, Any], params: FineParams, store: BlobStore, renderer: RendererProtocol, meshes: _MeshCache
 ) -> dict[str, Any]:
     """Compute and store one pair's maps; returns the Alignment columns (raises on bad input)."""
     for column in ("mesh_blob", "image_blob", "mask_blob"):
@@ -164,19 +165,21 @@ def run_fine_alignment(
     method: str = DEFAULT_METHOD,
     *,
     params: FineParams | None = None,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     limit: int | None = None,
     retry_failed: bool = False,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """Fine-align pending pairs (all active pairs, or those in `pair_ids`); returns a summary.
 
     `method` names the Alignment rows (unique with the pair); `params` are its settings (default
-    `FineParams()`); `renderer` anything with `part_ids(shape, camera, size)` (default: Mitsuba).
+    `FineParams()`); `renderer` anything with `part_ids(shape, camera, size)` (default: Mitsuba, built
+    when a pair is pending); `store` the blob store (default: the one `settings` configure).
     """
     settings = settings or get_settings()
     params = params or FineParams()
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     url = settings.resolved_database_url
     start = time.perf_counter()
     with session_scope(url) as session:
@@ -194,7 +197,7 @@ def run_fine_alignment(
         "up_to_date": len(candidates) - len(pending), "aligned": 0, "failed": 0, "failures": [],
     }
     if pending and renderer is None:
-        renderer = Renderer()
+        renderer = default_renderer(store)
     meshes = _MeshCache(store)
     ious: dict[str, list[float]] = {"coarse": [], "flow": [], "crf": []}
     seconds: list[float] = []
@@ -259,7 +262,7 @@ def evaluate_fine_alignment(
     IoU. Means are over pairs.
     """
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     truths = exemplar_records(groundtruth)
     root = getattr(groundtruth, "root", None)
     rows = session.execute(

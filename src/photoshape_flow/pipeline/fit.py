@@ -61,7 +61,8 @@ from photoshape_flow.pipeline.inference import IDENTITY_UV, resolve_classifier
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -195,10 +196,11 @@ def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | No
 
 
 def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: Settings | None = None,
-            renderer: Any = None, classifier_id: int | None = None, progress: Progress | None = None) -> FitSummary:
+            renderer: RendererProtocol | None = None, classifier_id: int | None = None,
+            progress: Progress | None = None, store: BlobStore | None = None) -> FitSummary:
     """Fit every pending pair (see the module docstring); resumable and idempotent, one bad pair never stops it."""
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     url = settings.resolved_database_url
     with session_scope(url) as session:
         classifier = resolve_classifier(session, classifier_id)

@@ -28,7 +28,9 @@ from photoshape_flow.pipeline.calibration import material_lab
 from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD
 from photoshape_flow.pipeline.render_inputs import material_spec
 from photoshape_flow.profiles import FitConfig
-from photoshape_flow.render import Camera, EnvmapSpec, Renderer
+from photoshape_flow.render import Camera, EnvmapSpec
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -65,7 +67,7 @@ class FitContext:
     """What one fit run needs once: the classifier, materials, their colours and specs, envmaps, a renderer."""
 
     def __init__(self, session: Session, store: BlobStore, classifier: m.Classifier, cfg: FitConfig,
-                 renderer: Any = None):
+                 renderer: RendererProtocol | None = None):
         self.store = store
         self.cfg = cfg
         self.classifier = classifier
@@ -96,7 +98,7 @@ class FitContext:
     def frame(self) -> FrameRenderer:
         if self._frame is None:
             if self._renderer is None:
-                self._renderer = Renderer(resolve=self.store.resolve)
+                self._renderer = default_renderer(self.store)
             self._frame = FrameRenderer(self._renderer, self.cfg.size, self.cfg.spp)
         return self._frame
 

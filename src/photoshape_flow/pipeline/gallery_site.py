@@ -22,7 +22,7 @@ from photoshape_flow.pipeline.downloads import export_dir, export_manifest
 from photoshape_flow.pipeline.grading import current_grades
 from photoshape_flow.pipeline.photoshapes import UNREFINED_VIEW, candidate_method_keys, provenance
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_OK
 
 
@@ -113,11 +113,11 @@ class GallerySite(NamedTuple):
     waiting: int
 
 
-def write_gallery_site(out_dir: str | Path, method: str | None = None,
-                       settings: Settings | None = None, progress: Progress | None = None) -> GallerySite:
+def write_gallery_site(out_dir: str | Path, method: str | None = None, settings: Settings | None = None,
+                       progress: Progress | None = None, store: BlobStore | None = None) -> GallerySite:
     """Gather the candidates from the database and write the static gallery."""
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     with session_scope(settings.resolved_database_url) as session:
         entries, materials = gallery_data(session, store, method, settings, progress)
     index = write_gallery(out_dir, entries, materials)
@@ -129,7 +129,7 @@ def write_contact_sheet(out: str | Path, method: str | None = None, settings: Se
                         **kwargs: Any) -> Path:
     """The best candidates of `method` as one PNG (`export.contact_sheet`); returns its path."""
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = default_store(settings)
     with session_scope(settings.resolved_database_url) as session:
         entries, _ = gallery_data(session, store, method, settings)
     return contact_sheet(entries, out, **kwargs)

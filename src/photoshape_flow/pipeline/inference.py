@@ -53,7 +53,7 @@ from photoshape_flow.pipeline.calibration import (
 )
 from photoshape_flow.pipeline.training import stored_bn_prior
 from photoshape_flow.progress_sink import Progress, no_progress
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
 from photoshape_flow.vocab import SUBSTANCES
 
@@ -360,6 +360,7 @@ def run_inference(
     color_prior: bool = True,
     calibrate_substances: bool = True,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> InferenceSummary:
     """Write ranked assignments for every pending pair with one method; resumable and idempotent.
 
@@ -371,7 +372,7 @@ def run_inference(
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     url = settings.resolved_database_url
     with session_scope(url) as session:
         classifier = resolve_classifier(session, classifier_id) if method == "classifier" else None

@@ -27,7 +27,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.export.text import one_line as text_line
 from photoshape_flow.geometry.archive import ArchiveLimits
 from photoshape_flow.progress_sink import Progress as ProgressSink
-from photoshape_flow.store import BlobStore, sha256_file
+from photoshape_flow.store import BlobStore, default_store, sha256_file
 from photoshape_flow.vocab import STATUS_OK
 
 logger = logging.getLogger(__name__)
@@ -193,7 +193,7 @@ def resolve_settings(settings: Settings | None) -> Settings:
 
 
 def store_for(settings: Settings) -> BlobStore:
-    return BlobStore(settings.blob_root)
+    return default_store(settings)
 
 
 def one_line(exc: BaseException) -> str:

@@ -177,13 +177,14 @@ def ingest_envmaps(
     envmap_limits: EnvmapLimits | None = None,
     isolate: bool = True,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> IngestSummary:
     """Ingest .hdr/.exr files or folders of them. `split` forces "train" or "val" for the batch."""
     if split not in (None, "train", "val"):
         raise ValueError(f"split must be 'train' or 'val', got {split!r}")
     settings = resolve_settings(settings)
     url = settings.resolved_database_url
-    store = store_for(settings)
+    store = store if store is not None else store_for(settings)
     limits = limits or IngestLimits.from_settings(settings)
     env_limits = envmap_limits or EnvmapLimits()
     summary = IngestSummary("envmaps")
@@ -215,5 +216,5 @@ def ingest_envmaps(
 
         missing = materials_without_preview(url)
         if missing:
-            summary.warnings.extend(render_material_previews(missing, settings=settings).warnings)
+            summary.warnings.extend(render_material_previews(missing, settings=settings, store=store).warnings)
     return summary

@@ -154,6 +154,7 @@ def ingest_exemplars(
     settings: Settings | None = None,
     limits: IngestLimits | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> IngestSummary:
     """Ingest product photos (JPEG/PNG/WebP files or folders of them).
 
@@ -163,7 +164,7 @@ def ingest_exemplars(
     """
     settings = resolve_settings(settings)
     url = settings.resolved_database_url
-    store = store_for(settings)
+    store = store if store is not None else store_for(settings)
     limits = limits or IngestLimits.from_settings(settings)
     options = options or ExemplarOptions(size=size)
     src = source or "local"

@@ -49,7 +49,10 @@ from photoshape_flow.pipeline.ingest_common import (
     resolve_settings,
     store_for,
 )
-from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec, Renderer
+from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED
 
 logger = logging.getLogger(__name__)
@@ -125,6 +128,8 @@ def ingest_materials(
     limits: IngestLimits | None = None,
     progress: Progress | None = None,
     events: EventSink | None = None,
+    store: BlobStore | None = None,
+    renderer: RendererProtocol | None = None,
 ) -> IngestSummary:
     """Ingest material folders; `summary.new_material_ids` lists the materials this call added.
 
@@ -133,7 +138,7 @@ def ingest_materials(
     """
     settings = resolve_settings(settings)
     url = settings.resolved_database_url
-    store = store_for(settings)
+    store = store if store is not None else store_for(settings)
     limits = limits or IngestLimits.from_settings(settings)
     summary = IngestSummary("materials")
     folders = discover_material_folders(paths)
@@ -154,7 +159,8 @@ def ingest_materials(
     pending = (summary.added + summary.replaced
                + [i for i in materials_without_preview(url) if i in summary.present]) if previews else []
     if pending:
-        preview = render_material_previews(pending, settings=settings, size=preview_size)
+        preview = render_material_previews(pending, settings=settings, size=preview_size, store=store,
+                                           renderer=renderer)
         summary.skipped.extend(preview.skipped)
         summary.warnings.extend(preview.warnings)
     logger.info("materials: %d added, %d present, %d replaced, %d rejected", len(summary.added),
@@ -265,6 +271,8 @@ def render_material_previews(
     settings: Settings | None = None,
     size: int = 128,
     spp: int = 32,
+    store: BlobStore | None = None,
+    renderer: RendererProtocol | None = None,
 ) -> IngestSummary:
     """Render a sphere preview per material into `material.preview_blob`.
 
@@ -278,7 +286,7 @@ def render_material_previews(
     if not ids:
         return summary
     url = settings.resolved_database_url
-    store = store_for(settings)
+    store = store if store is not None else store_for(settings)
     with session_scope(url) as session:
         envmap = session.execute(
             sa.select(m.Envmap.blob).where(m.Envmap.status == STATUS_OK, m.Envmap.enabled, m.Envmap.blob.is_not(None))
@@ -292,7 +300,7 @@ def render_material_previews(
         summary.skipped.append(("previews", reason))
         return summary
     try:
-        renderer = Renderer()
+        renderer = renderer if renderer is not None else default_renderer(store)
     except Exception as exc:
         reason = f"renderer unavailable ({one_line(exc)})"
         logger.info("material previews skipped: %s", reason)

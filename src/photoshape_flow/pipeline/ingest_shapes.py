@@ -242,6 +242,7 @@ def ingest_shapes(
     options: PreprocessOptions | None = None,
     isolate: bool = True,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> IngestSummary:
     """Ingest OBJ/glTF/GLB files, ShapeNetCore v2 trees and Sweet Home 3D catalogs.
 
@@ -254,7 +255,7 @@ def ingest_shapes(
     if split not in (None, "train", "val"):
         raise ValueError(f"split must be 'train' or 'val', got {split!r}")
     url = settings.resolved_database_url
-    store = store_for(settings)
+    store = store if store is not None else store_for(settings)
     limits = limits or IngestLimits.from_settings(settings)
     options = options or PreprocessOptions()
     summary = IngestSummary("shapes")

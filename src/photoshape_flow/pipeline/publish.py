@@ -61,8 +61,9 @@ from photoshape_flow.pipeline.photoshapes import (
 from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, writing_stage
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.render import Renderer
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
 log = logging.getLogger(__name__)
@@ -109,14 +110,15 @@ def run_publish(
     floor: bool = False,
     formats: Sequence[str] = DEFAULT_FORMATS,
     export: bool = True,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> PublishSummary:
     """Render and export every candidate of `method` (all pairs, or `pair_ids`); resumable, idempotent."""
     settings = settings or get_settings()
     formats = parse_formats(list(formats))
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     summary = PublishSummary(method=method or DEFAULT_PUBLISH_METHOD)
     with session_scope(url) as session:
         todo = candidate_method_keys(session, method, pair_ids)
@@ -176,7 +178,7 @@ def run_publish(
                 summary.skipped += 1
                 continue
             if renderer is None:
-                renderer = Renderer(resolve=store.resolve)
+                renderer = default_renderer(store)
             started = time.perf_counter()
             common = {"kind": kind, "key": key, "params": params, "shape_id": item.shape_id, "pair_id": pair_id,
                       "envmap_id": item.envmap_id, "params_hash": params_hash,

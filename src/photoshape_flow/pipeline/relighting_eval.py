@@ -26,7 +26,8 @@ from photoshape_flow.db import models as m
 from photoshape_flow.evaluation.groundtruth import TruthEntry
 from photoshape_flow.pipeline.photoshapes import choose_envmap
 from photoshape_flow.pipeline.rerender_eval import MaterialSpecs, Refinements, ShapeMeshes
-from photoshape_flow.render import Camera, EnvmapSpec, Renderer
+from photoshape_flow.render import Camera, EnvmapSpec
+from photoshape_flow.render.factory import default_renderer
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
@@ -78,7 +79,7 @@ class Relighter:
         self.store = store
         self.size = size
         self.spp = spp
-        self.renderer = Renderer(resolve=store.resolve)
+        self.renderer = default_renderer(store)
         row = held_out_envmap(session)
         self.envmap_name = row.name if row is not None else None
         self.envmap = EnvmapSpec(store.resolve(row.blob)) if row is not None else None

@@ -24,7 +24,8 @@ from photoshape_flow.evaluation.tables import REFINED
 from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.pipeline.photoshapes import choose_envmap
 from photoshape_flow.pipeline.render_inputs import material_spec
-from photoshape_flow.render import Camera, EnvmapSpec, Renderer
+from photoshape_flow.render import Camera, EnvmapSpec
+from photoshape_flow.render.factory import default_renderer
 from photoshape_flow.render.specs import Refinement
 from photoshape_flow.store import BlobStore
 
@@ -78,7 +79,7 @@ class Rerenderer:
         self.store = store
         self.size = size
         self.spp = spp
-        self.renderer = Renderer(resolve=store.resolve)
+        self.renderer = default_renderer(store)
         self.specs = MaterialSpecs(store)
         self.meshes = ShapeMeshes(store)
         self.envmap = None

@@ -56,7 +56,8 @@ from photoshape_flow.pipeline.bn_prior import choose_substance_bn_prior
 from photoshape_flow.pipeline.training import load_material_classifier, run_training, stored_bn_prior
 from photoshape_flow.pipeline.training_renders import run_training_renders
 from photoshape_flow.progress_sink import Progress, counted, no_progress
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, SUBSTANCE_LABELS
 
 log = logging.getLogger(__name__)
@@ -110,17 +111,17 @@ def _load_label_map(store: BlobStore, ref: str) -> np.ndarray:
 
 def train_or_resume(
     settings: Settings, train_config: str | SubstanceTrainConfig = "cpu", *, progress: Progress | None = None,
-    **overrides: Any,
+    store: BlobStore | None = None, **overrides: Any,
 ) -> tuple[int, Any, dict[str, Any]]:
     """Train the substance network (or resume / reuse it); returns (classifier_id, model, info)."""
     set_torch_threads(settings.torch_threads)
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     device = resolve_device(settings.device)
     base = train_config if isinstance(train_config, SubstanceTrainConfig) else get_config(train_config)
     config = replace(base, device=device, seed=settings.seed, **overrides)
     if config.uses_backbone:
-        return train_recogniser(settings, config, progress=progress)
+        return train_recogniser(settings, config, progress=progress, store=store)
     name = f"substance-{config.preset}"
     with session_scope(url) as session:
         train, val, data_hash = load_bootstrap_data(session, store)
@@ -189,13 +190,13 @@ def train_or_resume(
     return classifier_id, result.model, info
 
 
-def train_recogniser(settings: Settings, config: SubstanceTrainConfig, *,
-                     progress: Progress | None = None) -> tuple[int, Any, dict[str, Any]]:
+def train_recogniser(settings: Settings, config: SubstanceTrainConfig, *, progress: Progress | None = None,
+                     store: BlobStore | None = None) -> tuple[int, Any, dict[str, Any]]:
     """The part recogniser on the bootstrap round (trained, resumed or reused by the training code)."""
     classifier_config = recogniser_config(config)
     classifier_id = run_training(classifier_config, settings=settings, kinds=("bootstrap",), progress=progress,
-                                 network_kind="substance")
-    row, model = load_material_classifier(classifier_id, settings, kind="substance")
+                                 network_kind="substance", store=store)
+    row, model = load_material_classifier(classifier_id, settings, kind="substance", store=store)
     info = {"classifier_id": classifier_id, "name": row.name, "architecture": row.architecture,
             "metrics": {k: v for k, v in (row.metrics or {}).items() if k in ("sub@1", "mtl@1", "epochs")},
             "device": str(model.device)}
@@ -235,7 +236,7 @@ def calibration_renders(session: sa.orm.Session, limit: int = CALIBRATION_RENDER
     return [(f"{kind}/{key}", blobs or {}) for kind, key, blobs in rows]
 
 
-def substance_temperature(settings: Settings, classifier_id: int) -> float | None:
+def substance_temperature(settings: Settings, classifier_id: int, store: BlobStore | None = None) -> float | None:
     """Part-level temperature of a substance network (`classify.substance_calibration`).
 
     Fit on renders of shapes and envmaps the network never trained on (`calibration_renders`: the
@@ -245,7 +246,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
     a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
     """
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     with session_scope(url) as session:
         row = session.get(m.Classifier, classifier_id)
         if row is None or row.kind != "substance" or not row.checkpoint_blob:
@@ -297,7 +298,7 @@ def substance_temperature(settings: Settings, classifier_id: int) -> float | Non
 
 def assign_part_substances(
     settings: Settings, classifier_id: int, model: Any, size: int, *, min_pixels: int = 1,
-    bn_prior: float | None = None, progress: Progress | None = None,
+    bn_prior: float | None = None, progress: Progress | None = None, store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """PartSubstance rows for every pair with an ok flow-crf alignment (skipping up-to-date pairs).
 
@@ -305,7 +306,7 @@ def assign_part_substances(
     (`classify.bn_adapt`, chosen by `pipeline.bn_prior`; None: as trained).
     """
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     summary = {"pairs": 0, "updated": 0, "skipped": 0, "failed": 0, "parts": 0, "unobserved": 0, "errors": []}
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, classifier_id)
@@ -412,23 +413,29 @@ def run_substances(
     batch: int = 16,
     train_overrides: dict[str, Any] | None = None,
     progress: Progress | None = None,
+    renderer: RendererProtocol | None = None,
+    store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """The whole substances stage: bootstrap renders -> substance network -> PartSubstance rows."""
     settings = settings or get_settings()
+    store = store if store is not None else default_store(settings)
     bootstrap = run_training_renders("bootstrap", bootstrap_count, size, spp, settings, batch=batch,
-                                     progress=progress)
-    return {"bootstrap": bootstrap, **train_and_assign(settings, size, train_config, train_overrides, progress)}
+                                     renderer=renderer, progress=progress, store=store)
+    return {"bootstrap": bootstrap,
+            **train_and_assign(settings, size, train_config, train_overrides, progress, store=store)}
 
 
 def train_and_assign(settings: Settings, size: int, train_config: str | SubstanceTrainConfig = "cpu",
                      train_overrides: dict[str, Any] | None = None,
-                     progress: Progress | None = None) -> dict[str, Any]:
+                     progress: Progress | None = None, *, store: BlobStore | None = None) -> dict[str, Any]:
     """The network on the bootstrap renders that exist (trained or resumed), then every part's substance."""
-    classifier_id, model, info = train_or_resume(settings, train_config, progress=progress, **(train_overrides or {}))
+    store = store if store is not None else default_store(settings)
+    classifier_id, model, info = train_or_resume(settings, train_config, progress=progress, store=store,
+                                                 **(train_overrides or {}))
     predict_size = _config_size(settings, classifier_id) or size
-    choice = choose_substance_bn_prior(settings, classifier_id, model, predict_size)
+    choice = choose_substance_bn_prior(settings, classifier_id, model, predict_size, store=store)
     parts = assign_part_substances(settings, classifier_id, model, predict_size, bn_prior=choice["bn_prior"],
-                                   progress=progress)
+                                   progress=progress, store=store)
     return {"network": info, "bn_prior": choice, "part_substances": parts}
 
 

@@ -51,7 +51,7 @@ from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, no_progress
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
 log = logging.getLogger(__name__)
@@ -155,7 +155,7 @@ def stored_bn_prior(classifier: Classifier | None) -> float | None:
 
 def load_material_classifier(
     classifier_id: int | None = None, settings: Settings | None = None, device: str | None = None,
-    kind: str = "material",
+    kind: str = "material", store: BlobStore | None = None,
 ) -> tuple[Classifier, Any]:
     """(row, `MaterialClassifier`) for `classifier_id` or the newest ok material classifier.
 
@@ -175,7 +175,7 @@ def load_material_classifier(
             if row.status != STATUS_OK or not row.checkpoint_blob:
                 raise LookupError(f"classifier {classifier_id}: status {row.status}, not usable")
         session.expunge(row)
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     return row, load_classifier(store.read_bytes(row.checkpoint_blob), device=device or settings.device,
                                 bn_prior=stored_bn_prior(row))
 
@@ -239,6 +239,7 @@ def run_training(
     kinds: Sequence[str] = TRAINING_KINDS,
     progress: Progress | None = None,
     network_kind: str = "material",
+    store: BlobStore | None = None,
 ) -> int:
     """Train (or reuse, or resume) the material classifier; returns its `Classifier` id.
 
@@ -251,7 +252,7 @@ def run_training(
     settings = settings or get_settings()
     cfg = config if isinstance(config, ClassifierConfig) else get_config(config, **(overrides or {}))
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     set_torch_threads(settings.torch_threads)
 
     with session_scope(url) as session:

@@ -48,8 +48,9 @@ from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.pipeline.render_inputs import envmap_spec, material_spec
 from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.progress_sink import Progress, no_progress
-from photoshape_flow.render import Renderer
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
     SPEC_VERSION,
@@ -296,9 +297,10 @@ def run_training_renders(
     *,
     val_fraction: float = VAL_FRACTION,
     saturation_threshold: float = SATURATION_THRESHOLD,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     indices: Sequence[int] | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """Render `count` items of `round` (resumable, idempotent); returns a summary dict.
 
@@ -313,7 +315,7 @@ def run_training_renders(
         raise ValueError(f"round must be one of {ROUNDS}, got {round!r}")
     settings = settings or get_settings()
     url = settings.resolved_database_url
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     with session_scope(url) as session:
         pools = load_pools(session, round, val_fraction)
     per_split = split_counts(count, pools, val_fraction)
@@ -365,7 +367,7 @@ def run_training_renders(
         if not pending:
             continue
         if renderer is None:
-            renderer = Renderer(resolve=store.resolve)
+            renderer = default_renderer(store)
         for spec, params_hash in pending:
             started = time.perf_counter()
             try:

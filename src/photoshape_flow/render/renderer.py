@@ -40,7 +40,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from photoshape_flow.config import get_settings
 from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.pool import ENVMAP_RESOLUTION, beauty_pool
@@ -49,7 +48,7 @@ from photoshape_flow.render.runtime import ensure_mitsuba
 from photoshape_flow.render.scene import SceneOptions, build_scene, part_index_from_key
 from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, UVTransform, material_from_builtin
 from photoshape_flow.render.tonemap import composite, saturated_fraction
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import default_store
 
 _RENDER_LOCK = threading.RLock()
 
@@ -123,7 +122,7 @@ class Renderer:
     # -- materials -------------------------------------------------------------------------
     def resolve_ref(self, ref: str) -> Path:
         if self._resolve is None:
-            self._resolve = BlobStore(get_settings().blob_root).resolve
+            self._resolve = default_store().resolve
         return Path(self._resolve(ref))
 
     def resolve_materials(

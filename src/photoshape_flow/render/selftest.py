@@ -14,7 +14,7 @@ import numpy as np
 
 from photoshape_flow.geometry.mesh import PartMesh, ShapeMesh
 from photoshape_flow.render.camera import Camera
-from photoshape_flow.render.renderer import Renderer
+from photoshape_flow.render.factory import default_renderer
 from photoshape_flow.render.runtime import LLVM_HINT, RendererUnavailableError, ensure_mitsuba, loaded_llvm
 
 
@@ -29,7 +29,7 @@ def self_test() -> None:
         normals=np.tile(np.array([[0, 0, 1]], np.float32), (4, 1)),
         uvs=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32),
     )
-    ids = Renderer().part_ids(ShapeMesh(parts=[quad]), Camera(0.0, 0.0, 2.0, 50.0), size=16)
+    ids = default_renderer().part_ids(ShapeMesh(parts=[quad]), Camera(0.0, 0.0, 2.0, 50.0), size=16)
     if ids[8, 8] != 1 or ids[0, 0] != 0:
         raise SystemExit(f"wrong part-ID render: centre {ids[8, 8]}, corner {ids[0, 0]}")
     sys.stdout.write(f"ok variant={mi.variant()} llvm={loaded_llvm() or 'n/a'}\n")

@@ -56,17 +56,17 @@ def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = N
     config = _config(cfg)
     if work is None:
         report = _features_report("shapes", coarse.compute_view_features(
-            config=config, settings=ctx.settings, renderer=ctx.renderer, progress=ctx.progress))
+            config=config, settings=ctx.settings, renderer=ctx.renderer, progress=ctx.progress, store=ctx.store))
         report = report.merge(_features_report("exemplars", coarse.compute_exemplar_features(
-            config=config, settings=ctx.settings, progress=ctx.progress)))
+            config=config, settings=ctx.settings, progress=ctx.progress, store=ctx.store)))
         report = report.merge(finish(ctx, cfg))
         return report
     if work.part == "shapes":
         counts = coarse.compute_view_features(list(work.ids), config=config, settings=ctx.settings,
-                                              renderer=ctx.renderer, progress=ctx.progress)
+                                              renderer=ctx.renderer, progress=ctx.progress, store=ctx.store)
     elif work.part == "exemplars":
         counts = coarse.compute_exemplar_features(list(work.ids), config=config, settings=ctx.settings,
-                                                  progress=ctx.progress)
+                                                  progress=ctx.progress, store=ctx.store)
     else:
         raise ValueError(f"{NAME} has no part {work.part!r}")
     return _features_report(work.part, counts)
@@ -74,5 +74,5 @@ def run(ctx: StageContext, cfg: CoarseAlignmentConfig, work: WorkUnit | None = N
 
 def finish(ctx: StageContext, cfg: CoarseAlignmentConfig) -> StageReport:
     """Exact retrieval over all descriptors, inverted into per-shape pairs."""
-    pairs = compute_pairs(config=_config(cfg), settings=ctx.settings)
+    pairs = compute_pairs(config=_config(cfg), settings=ctx.settings, store=ctx.store)
     return StageReport(NAME, details={"pairs": pairs})

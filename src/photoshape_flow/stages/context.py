@@ -1,4 +1,4 @@
-"""What a stage needs from its caller, in one object: settings, store, sessions, device, sinks.
+"""What a stage needs from its caller, in one object: settings, store, renderer, sessions, device, sinks.
 
 The CLI and the flows each build one (`StageContext.create`) with their own progress and event
 sinks, so a stage never asks where it runs: the CLI shows progress bars and sends events to the
@@ -18,7 +18,8 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.events import NO_EVENTS, EventSink
 from photoshape_flow.progress_sink import Progress, no_progress
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 
 # progress(task, items done, items in all): the one interface long loops report to (progress_sink.py)
 ProgressSink = Progress
@@ -31,7 +32,9 @@ class StageContext:
     settings: Settings
     progress: ProgressSink = no_progress
     events: EventSink = NO_EVENTS
-    renderer: Any = None  # None: each stage makes its own (tests inject a shared or fake one)
+    # None: the stage's pipeline function builds one with `render.factory.default_renderer` when it
+    # first renders (Mitsuba's start-up is expensive; most stages never render); tests inject a fake
+    renderer: RendererProtocol | None = None
 
     @classmethod
     def create(cls, settings: Settings | None = None, **kwargs: Any) -> StageContext:
@@ -39,7 +42,7 @@ class StageContext:
 
     @cached_property
     def store(self) -> BlobStore:
-        return BlobStore(self.settings.blob_root)
+        return default_store(self.settings)
 
     @property
     def database_url(self) -> str:

@@ -27,7 +27,8 @@ def versions(ctx: StageContext, cfg: FineAlignmentConfig, unit: WorkUnit) -> dic
 
 def run(ctx: StageContext, cfg: FineAlignmentConfig, work: WorkUnit | None = None) -> StageReport:
     summary = run_fine_alignment(None if work is None else list(work.ids), ctx.settings,
-                                 params=FineParams(size=cfg.size), renderer=ctx.renderer, progress=ctx.progress)
+                                 params=FineParams(size=cfg.size), renderer=ctx.renderer, progress=ctx.progress,
+                                 store=ctx.store)
     return StageReport(NAME, done=int(summary["aligned"]), skipped=int(summary["up_to_date"]),
                        failed=int(summary["failed"]),
                        details={"failures": summary.get("failures", [])[:20]})

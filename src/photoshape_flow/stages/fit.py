@@ -31,7 +31,7 @@ def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> Stag
     from photoshape_flow.pipeline.fit import run_fit
 
     summary = run_fit(cfg, pair_ids=None if work is None else list(work.ids), settings=ctx.settings,
-                      renderer=ctx.renderer, progress=ctx.progress)
+                      renderer=ctx.renderer, progress=ctx.progress, store=ctx.store)
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
         blocked=blocked_by(summary.blocked),

@@ -52,7 +52,8 @@ def run(ctx: StageContext, cfg: InferenceConfig, work: WorkUnit | None = None) -
 def _run_method(ctx: StageContext, cfg: InferenceConfig, method: str, pair_ids: list[int] | None) -> StageReport:
     from photoshape_flow.pipeline.inference import run_inference
 
-    summary = run_inference(method, pair_ids=pair_ids, top_k=cfg.top_k, settings=ctx.settings, progress=ctx.progress)
+    summary = run_inference(method, pair_ids=pair_ids, top_k=cfg.top_k, settings=ctx.settings, progress=ctx.progress,
+                            store=ctx.store)
     return StageReport(
         NAME, done=summary.pairs_done, skipped=summary.pairs_skipped, failed=len(summary.pairs_failed),
         blocked=blocked_by(summary.blocked),

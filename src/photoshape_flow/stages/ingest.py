@@ -35,13 +35,14 @@ def _per_collection(ctx: StageContext, collection: str) -> Any:
     return lambda _label, done, total: ctx.progress(f"ingest {collection}", done, total)
 
 
-def _collection(name: str, paths: list[Path], kwargs: dict[str, Any]) -> Any:
+def _collection(ctx: StageContext, name: str, paths: list[Path], kwargs: dict[str, Any]) -> Any:
     """One collection's ingest; should it raise outside its items (an unreadable folder while walking
-    it), that is one rejected line for the collection, and the other collections still go in: a poison
-    file in the inbox never fails a run."""
+    it, a blob store that cannot be opened), that is one rejected line for the collection, and the
+    other collections still go in: a poison file in the inbox never fails a run."""
     summary = ingest.IngestSummary(name)
     function = getattr(ingest, f"ingest_{name}")
-    done = ingest_common.guard_item(summary, ", ".join(str(p) for p in paths), lambda: function(paths, **kwargs))
+    done = ingest_common.guard_item(summary, ", ".join(str(p) for p in paths),
+                                    lambda: function(paths, store=ctx.store, **kwargs))
     return summary if done is None else done
 
 
@@ -65,8 +66,9 @@ def run(ctx: StageContext, cfg: IngestConfig, work: IngestRequest | None = None)
         if name == "exemplars":
             kwargs["size"] = cfg.exemplar_size
         if name == "materials":
-            kwargs.update(previews=cfg.previews, preview_size=cfg.preview_size, events=ctx.events)
-        summary = _collection(name, paths, kwargs)
+            kwargs.update(previews=cfg.previews, preview_size=cfg.preview_size, events=ctx.events,
+                          renderer=ctx.renderer)
+        summary = _collection(ctx, name, paths, kwargs)
         report = report.merge(StageReport(
             "ingest", done=len(summary.added) + len(summary.replaced), skipped=len(summary.present),
             rejected=len(summary.rejected),

@@ -47,7 +47,7 @@ def versions(ctx: StageContext, cfg: PublishConfig, unit: WorkUnit) -> dict[int,
 def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> StageReport:
     ids = list(work.ids) if work is not None else list(plan(ctx, cfg)[0].ids)
     summary = run_publish(ids, cfg.method, ctx.settings, views=cfg.views, size=cfg.size, spp=cfg.spp,
-                          formats=cfg.formats, progress=ctx.progress)
+                          formats=cfg.formats, renderer=ctx.renderer, progress=ctx.progress, store=ctx.store)
     report = StageReport(NAME, done=summary.rendered, skipped=summary.skipped, failed=summary.failed,
                          details={"publish": summary.as_dict()})
     if work is None:
@@ -57,6 +57,6 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
 def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
     """The gallery site over everything published so far with `publish.method`."""
-    site = write_gallery_site(gallery_dir(ctx), cfg.method, ctx.settings, progress=ctx.progress)
+    site = write_gallery_site(gallery_dir(ctx), cfg.method, ctx.settings, progress=ctx.progress, store=ctx.store)
     return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
                                       "gallery_waiting": site.waiting, "method": cfg.method})

@@ -33,7 +33,7 @@ def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) 
     if work is not None:
         return _bootstrap(ctx, cfg, work)
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
-                             train_config=cfg.network, progress=ctx.progress)
+                             train_config=cfg.network, progress=ctx.progress, renderer=ctx.renderer, store=ctx.store)
     return _report(summary, summary["bootstrap"])
 
 
@@ -41,13 +41,15 @@ def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
     """After every bootstrap unit: the network (trained or resumed) and the parts' substances."""
     from photoshape_flow.pipeline.substances import train_and_assign
 
-    summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network, progress=ctx.progress)
+    summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network, progress=ctx.progress,
+                               store=ctx.store)
     return _report(summary, None)
 
 
 def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> StageReport:
     renders = run_training_renders("bootstrap", cfg.bootstrap_count, cfg.size, cfg.spp, ctx.settings,
-                                   renderer=ctx.renderer, indices=work.ids, progress=ctx.progress)
+                                   renderer=ctx.renderer, indices=work.ids, progress=ctx.progress,
+                                   store=ctx.store)
     counts = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}
     return StageReport(NAME, done=int(renders["rendered"]), skipped=int(renders["skipped"]),
                        failed=int(renders["failed"]), rejected=int(renders["rejected"]), details={"bootstrap": counts})

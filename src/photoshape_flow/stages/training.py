@@ -19,8 +19,8 @@ def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageRep
     from photoshape_flow.pipeline.calibration import calibrate
     from photoshape_flow.pipeline.training import run_training
 
-    classifier_id = run_training(cfg, settings=ctx.settings, progress=ctx.progress)
-    calibration = calibrate(ctx.settings, classifier_id)
+    classifier_id = run_training(cfg, settings=ctx.settings, progress=ctx.progress, store=ctx.store)
+    calibration = calibrate(ctx.settings, classifier_id, store=ctx.store)
     with ctx.session() as session:
         clf = session.get(m.Classifier, classifier_id)
         assert clf is not None

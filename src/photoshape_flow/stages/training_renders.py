@@ -63,7 +63,8 @@ def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> d
 
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
     summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer,
-                                   indices=None if work is None else work.ids, progress=ctx.progress)
+                                   indices=None if work is None else work.ids, progress=ctx.progress,
+                                   store=ctx.store)
     return StageReport(
         NAME, done=int(summary["rendered"]), skipped=int(summary["skipped"]), failed=int(summary["failed"]),
         rejected=int(summary["rejected"]),

@@ -8,6 +8,7 @@ bytes. Writes are atomic and idempotent: a ref that exists is always complete.
 """
 
 from photoshape_flow.store.blobstore import BlobStore
+from photoshape_flow.store.factory import default_store
 from photoshape_flow.store.refs import REF_PATTERN, is_ref, is_url, sha256_bytes, sha256_file
 from photoshape_flow.store.stored import BlobCorruptError, BlobNotFoundError, GcReport
 
@@ -17,6 +18,7 @@ __all__ = [
     "BlobNotFoundError",
     "BlobStore",
     "GcReport",
+    "default_store",
     "is_ref",
     "is_url",
     "sha256_bytes",

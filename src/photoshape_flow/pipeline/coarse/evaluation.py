@@ -10,7 +10,6 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.align.descriptors import crop_mask
 from photoshape_flow.align.viewpoints import angular_errors_deg, cameras_from_rows
-from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.demo.groundtruth import exemplar_records, record_field, source_keys
 from photoshape_flow.evaluation.bootstrap import OBSERVATIONS
@@ -18,8 +17,9 @@ from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.pipeline.coarse.config import CoarseConfig
 from photoshape_flow.pipeline.coarse.reverse_index import load_reverse_index
 from photoshape_flow.pipeline.coarse.viewpoint_sets import config_viewpoint_set
-from photoshape_flow.render import renderer as render_module
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import default_store
 
 
 def evaluate_coarse_alignment(
@@ -27,7 +27,7 @@ def evaluate_coarse_alignment(
     groundtruth: Any,
     *,
     config: CoarseConfig | None = None,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     iou_size: int = 128,
 ) -> dict[str, Any]:
     """Shape recall, pose error and silhouette IoU of the reverse index against demo ground truth.
@@ -43,7 +43,7 @@ def evaluate_coarse_alignment(
     each mean's values per exemplar id, for its bootstrap interval.
     """
     config = config or CoarseConfig()
-    store = BlobStore(get_settings().blob_root)
+    store = default_store()
     vpset = config_viewpoint_set(session, config)
     cameras = cameras_from_rows(vpset.cameras)
     index = load_reverse_index(session, config)
@@ -88,7 +88,7 @@ def evaluate_coarse_alignment(
                 el_err.append(float(del_))
         if len(retrieved) and mask_blob is not None and meshes.get(retrieved[0]):
             if renderer is None:
-                renderer = render_module.Renderer()
+                renderer = default_renderer()
             sid = retrieved[0]
             if sid not in mesh_cache:
                 mesh_cache[sid] = ShapeMesh.from_npz_bytes(store.read_bytes(meshes[sid]))

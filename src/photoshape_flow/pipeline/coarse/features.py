@@ -32,8 +32,9 @@ from photoshape_flow.pipeline.coarse.viewpoint_sets import (
 )
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.render import renderer as render_module
-from photoshape_flow.store import BlobStore
+from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
 
@@ -43,16 +44,17 @@ def compute_view_features(
     *,
     config: CoarseConfig | None = None,
     settings: Settings | None = None,
-    renderer: Any = None,
+    renderer: RendererProtocol | None = None,
     limit: int | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """Descriptor shards of the viewpoint sweep of each pending shape (all usable shapes by default).
 
     Returns counts: computed, skipped (up to date), failed, plus seconds and the errors by shape id.
     """
     start = time.perf_counter()
-    config, store, url = _step_inputs(config, settings)
+    config, store, url = _step_inputs(config, settings, store)
     with session_scope(url) as session:
         vpset = config_viewpoint_set(session, config)
         vp_id, cameras = vpset.id, cameras_from_rows(vpset.cameras)
@@ -69,7 +71,7 @@ def compute_view_features(
         expected = {sid: view_feature_hash(config, vpset, blob) for sid, blob in shapes}
     pending = _pending(shapes, existing, expected, limit)
     if pending and renderer is None:
-        renderer = render_module.Renderer()
+        renderer = default_renderer(store)
     def shard(item: Sequence[Any]) -> dict[str, Any]:
         item_start = time.perf_counter()
         mesh = ShapeMesh.from_npz_bytes(store.read_bytes(item[1]))
@@ -104,10 +106,11 @@ def compute_exemplar_features(
     settings: Settings | None = None,
     limit: int | None = None,
     progress: Progress | None = None,
+    store: BlobStore | None = None,
 ) -> dict[str, Any]:
     """The descriptor of each pending exemplar from its stored crop and mask (same counts as above)."""
     start = time.perf_counter()
-    config, store, url = _step_inputs(config, settings)
+    config, store, url = _step_inputs(config, settings, store)
     with session_scope(url) as session:
         q = sa.select(m.Exemplar.id, m.Exemplar.image_blob, m.Exemplar.mask_blob).where(
             m.Exemplar.status == "ok", ~m.Exemplar.exclude, m.Exemplar.image_blob.is_not(None)
@@ -145,10 +148,12 @@ def compute_exemplar_features(
     return summary
 
 
-def _step_inputs(config: CoarseConfig | None, settings: Settings | None) -> tuple[CoarseConfig, BlobStore, str]:
-    """A step's configuration (the default when None), blob store and database URL."""
+def _step_inputs(config: CoarseConfig | None, settings: Settings | None,
+                 store: BlobStore | None) -> tuple[CoarseConfig, BlobStore, str]:
+    """A step's configuration and blob store (the defaults when None) and database URL."""
     settings = settings or get_settings()
-    return config or CoarseConfig(), BlobStore(settings.blob_root), settings.resolved_database_url
+    store = store if store is not None else default_store(settings)
+    return config or CoarseConfig(), store, settings.resolved_database_url
 
 
 def _restricted(query: sa.Select[Any], model: Any, ids: Sequence[int] | None, category: str | None) -> sa.Select[Any]:

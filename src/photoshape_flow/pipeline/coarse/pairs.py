@@ -45,7 +45,7 @@ from photoshape_flow.pipeline.coarse.viewpoint_sets import (
     exemplar_feature_hash,
     view_feature_hash,
 )
-from photoshape_flow.store import BlobStore
+from photoshape_flow.store import BlobStore, default_store
 
 DROPPED_REASON = "coarse-alignment: no longer among the shape's top exemplars"
 
@@ -68,7 +68,8 @@ def pair_hash(config: CoarseConfig, vpset: m.ViewpointSet) -> str:
     )
 
 
-def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | None = None) -> dict[str, Any]:
+def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | None = None,
+                  store: BlobStore | None = None) -> dict[str, Any]:
     """Update the reverse index with what is new and rewrite the pairs of the affected shapes.
 
     Returns counts: exemplars searched against all shapes (``full``) or only new shapes
@@ -76,7 +77,7 @@ def compute_pairs(*, config: CoarseConfig | None = None, settings: Settings | No
     """
     config = config or CoarseConfig()
     settings = settings or get_settings()
-    store = BlobStore(settings.blob_root)
+    store = store if store is not None else default_store(settings)
     url = settings.resolved_database_url
     start = time.perf_counter()
     scan_time = utcnow()
