@@ -59,6 +59,19 @@ def test_db_upgrade_current_and_status(settings_env: Path) -> None:
     assert "behind head" in invoke("db", "current").output
 
 
+def test_run_all_on_an_empty_collection_fails_in_one_line_naming_the_stage(settings_env: Path) -> None:
+    """Nothing ingested yet: the run stops at the first stage that cannot work (no shape to render), says which
+    and why in one line, records the run failed, and prints no traceback."""
+    assert invoke("db", "upgrade").exit_code == 0
+    result = invoke("run", "all", "--profile", "tiny")
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    flat = " ".join(result.output.split())
+    assert "failed: substances: no usable shape" in flat, result.output  # its bootstrap renders
+    status = " ".join(invoke("status").output.split())
+    assert "running" not in status.replace("running: 0", "")
+
+
 def test_gc_keeps_referenced_blobs(db_url: str, store) -> None:  # type: ignore[no-untyped-def]
     import os
     import time

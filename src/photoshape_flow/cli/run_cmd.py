@@ -51,8 +51,10 @@ def print_reports(reports: Sequence[StageReport], title: str = "stages run") -> 
 
 def run_reporting_blocked(call: Callable[[], list[StageReport]]) -> list[StageReport]:
     """`call` (a `run_all`), or, when it stopped at a stage another live worker holds, that stage's
-    one line (how many items, by whom, until when) and exit code 3 after the table of what did run."""
-    from photoshape_flow.stages.run import StageBlocked
+    one line (how many items, by whom, until when) and exit code 3 after the table of what did run;
+    when a stage refused its input (e.g. an empty collection), the table, one line naming the stage
+    and the reason, and exit code 1."""
+    from photoshape_flow.stages.run import StageBlocked, StageFailed
 
     try:
         return call()
@@ -60,6 +62,11 @@ def run_reporting_blocked(call: Callable[[], list[StageReport]]) -> list[StageRe
         print_reports(exc.reports)
         err_console.print(f"[bold yellow]blocked:[/] {exc}", highlight=False, soft_wrap=True)
         raise typer.Exit(BLOCKED_EXIT_CODE) from None
+    except StageFailed as exc:
+        if exc.reports:
+            print_reports(exc.reports)
+        err_console.print(f"[bold red]failed:[/] {exc}", highlight=False, soft_wrap=True)
+        raise typer.Exit(1) from None
 
 
 def profile_fields(data: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:

@@ -51,6 +51,16 @@ class StageBlocked(Exception):
         self.reports = reports
 
 
+class StageFailed(Exception):
+    """`run_all` stopped: a stage could not run on what it was given (its ValueError, the project's one-line
+    refusal, e.g. no usable shape yet), named with the stage; `reports` are the stages done before it."""
+
+    def __init__(self, stage: str, error: ValueError, reports: list[StageReport]) -> None:
+        super().__init__(f"{stage}: {error}")
+        self.stage = stage
+        self.reports = reports
+
+
 def blocked_line(report: StageReport, hint: str = "; not done by this run (use --wait to wait for them)") -> str:
     """One line for people: how many items, held by whom, until when."""
     b = report.blocked
@@ -150,7 +160,10 @@ def run_all(profile: str | Profile | ResolvedProfile, ctx: StageContext, names: 
     try:
         for name in wanted:
             work = ingest if name == "ingest" else None
-            report = run_stage(name, resolved, ctx, work)
+            try:
+                report = run_stage(name, resolved, ctx, work)
+            except ValueError as exc:  # the stage refused its input in one line: say which stage, no traceback
+                raise StageFailed(name, exc, reports) from exc
             if wait and report.blocked.count:  # said once; then polled quietly
                 log.warning("waiting: %s", blocked_line(report, hint=""))
             while wait and report.blocked.count:
