@@ -17,7 +17,7 @@ from photoshape_flow.flows.tasks import task_runner
 from prefect import flow, get_run_logger
 
 from photoshape_flow.profiles import resolve_profile
-from photoshape_flow.stages import STAGE_NAMES
+from photoshape_flow.stages import REGISTRY, STAGE_NAMES
 
 StageName = Literal[STAGE_NAMES]  # type: ignore[valid-type]
 
@@ -104,7 +104,7 @@ def new_materials(profile: ProfileName | None = None, renders_per_material: int 
     url = get_settings().resolved_database_url
     name, sets = effective(profile, overrides)
     with session_scope(url) as session:
-        rerun = plan_material_rerun(session, name, sets, renders_per_material)
+        rerun = plan_material_rerun(session, name, sets, renders_per_material, registry=REGISTRY)
         before = fit_snapshot(session, rerun.fit_key, rerun.pairs)
     summary: dict[str, Any] = {"new_materials": rerun.new_ids, "new_material_names": rerun.new_names,
                                "previous_classifier_id": rerun.previous_classifier_id,

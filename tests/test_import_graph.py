@@ -54,10 +54,6 @@ LAZY_ALLOWED: dict[tuple[str, str], str] = {
     (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.obj"): "the CLI's start reads EXPORTERS; no writer",
     (f"{PACKAGE}.classify.color_prior", f"{PACKAGE}.classify.dataset"):
         "the render readers live in the torch dataset module; only fitting sigma on renders needs them",
-    # not a heavy import but an inverted layer, left for later: the planner reads the stage registry
-    # (the composition root, above pipeline); the CLI and flows/ call it without passing the registry
-    (f"{PACKAGE}.pipeline.new_materials", f"{PACKAGE}.stages"):
-        "layer inversion pending: plan_material_rerun should take the registry from its callers",
 }
 
 # The layers, top to bottom (docs/architecture.md): a module imports its own layer or lower ones. A
@@ -76,7 +72,6 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 LAYER_EXCEPTIONS: dict[tuple[str, str], str] = {
     (f"{PACKAGE}.render.renderer", f"{PACKAGE}.store"):
         "a Renderer built without `resolve` reads blob refs from the process's blob store",
-    (f"{PACKAGE}.pipeline.new_materials", f"{PACKAGE}.stages"): "see LAZY_ALLOWED",
 }
 
 

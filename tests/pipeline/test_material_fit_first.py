@@ -88,7 +88,7 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
     from photoshape_flow.pipeline.new_materials import plan_material_rerun
     from photoshape_flow.pipeline.photoshapes import assignment_set_keys
     from photoshape_flow.profiles import resolve_profile
-    from photoshape_flow.stages import StageContext, run_all
+    from photoshape_flow.stages import REGISTRY, StageContext, run_all
 
     truth_of, held_out = _plant(tiny_demo, db_url, store)
     # the collection's last run: fit, at the tiny profile (the re-run inherits it, publish.method=fit included)
@@ -99,7 +99,7 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
     with session_scope(db_url) as session:
         new_name = session.get(m.Material, new_id).name
         classifiers = session.execute(sa.select(sa.func.count()).select_from(m.Classifier)).scalar_one()
-        rerun = plan_material_rerun(session, "tiny", [], renders_per_material=6)
+        rerun = plan_material_rerun(session, "tiny", [], renders_per_material=6, registry=REGISTRY)
     assert rerun.new_ids == [new_id] and rerun.stages == ["fit", "publish"]
     assert set(rerun.pairs) == {p for p, _ in truth_of}  # every planted pair has an observed part
 

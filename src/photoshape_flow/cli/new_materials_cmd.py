@@ -36,6 +36,7 @@ def new_materials(
     from photoshape_flow.flows.events import stage_context
     from photoshape_flow.pipeline.new_materials import plan_material_rerun
     from photoshape_flow.pipeline.runs import effective_profile
+    from photoshape_flow.stages import REGISTRY
     from photoshape_flow.stages.rerun import run_material_rerun
 
     setup_logging(verbose)
@@ -45,7 +46,7 @@ def new_materials(
         with ctx.session() as session:
             name, sets = effective_profile(session, profile, overrides or [])
             resolve_profile_or_fail(name, sets)
-            rerun = plan_material_rerun(session, name, sets, renders_per_material)
+            rerun = plan_material_rerun(session, name, sets, renders_per_material, registry=REGISTRY)
         if not rerun.new_ids:
             console.print(f"no new materials since classifier {rerun.previous_classifier_id}: nothing to do")
             return

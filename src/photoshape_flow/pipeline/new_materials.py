@@ -115,10 +115,11 @@ class MaterialRerun:
 
 
 def plan_material_rerun(session: Session, profile: str, overrides: Sequence[str] = (),
-                        renders_per_material: int = 40) -> MaterialRerun:
+                        renders_per_material: int = 40, *, registry: Sequence[StageLike]) -> MaterialRerun:
     """The triggered re-run for the materials the newest classifier lacks (no stages when there are none).
 
-    Its stages are `rerun_stages(..., "triggered")`, limited to `affected_pairs`. Training and
+    Its stages are `rerun_stages(registry, ..., "triggered")`, limited to `affected_pairs`; the caller
+    (the CLI, flows/) passes the stage registry, which sits above pipeline/. Training and
     bootstrap render counts grow by `renders_per_material` per new material over what exists (or the
     profile's count, if larger), as overrides recorded with the run: the triggered run does not use
     them, the nightly run does (it runs with the profile and overrides the collection was last run
@@ -138,9 +139,7 @@ def plan_material_rerun(session: Session, profile: str, overrides: Sequence[str]
         + extra,
     }
     kept = [o for o in overrides if o.partition("=")[0].strip() not in counts]
-    from photoshape_flow.stages import REGISTRY
-
     fit_key, pairs = affected_pairs(session)
     return MaterialRerun(new_ids, previous_id, profile, kept + [f"{k}={v}" for k, v in counts.items()],
-                         rerun_stages(REGISTRY, "material", "triggered"), pairs, fit_key,
+                         rerun_stages(registry, "material", "triggered"), pairs, fit_key,
                          [str(names.get(i, i)) for i in new_ids])
