@@ -51,7 +51,8 @@
     box.append(buttons,note,status,nav);
     el.closest('section').after(box);
     document.addEventListener('keydown',(ev)=>{
-      if(ev.ctrlKey||ev.metaKey||ev.altKey||ev.target.closest('input,textarea,select')) return;
+      const typing=ev.target instanceof Element&&ev.target.closest('input,textarea,select');
+      if(ev.ctrlKey||ev.metaKey||ev.altKey||typing) return;
       const hit=cfg.grades.find(([key])=>key===ev.key); if(!hit||box.dataset.disabled) return;
       ev.preventDefault();send(el,hit[1]);});
   }
