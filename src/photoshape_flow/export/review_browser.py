@@ -5,8 +5,8 @@ The same system Chromium and pinned playwright-core as `export.browser`: open th
 key, reload, filter the index to the ungraded ones. The report says what the page showed at each
 step (``steps``) and, as `export.browser.problems` reads it, every console error, page error,
 failed request and request that tried to leave the server (aborted). With `screenshots`, each
-step is also a PNG there (review-1-turned.png ... review-4-ungraded.png: the gallery section of
-the README shows them).
+step is also a PNG there (review-1-turned.png ... review-4-ungraded.png, as docs/operations.md
+shows them; `scripts/review-screenshots.sh` makes them from the tiny demo).
 """
 
 from __future__ import annotations
