@@ -68,9 +68,14 @@ def test_gallery_loads_in_chromium_and_sorts(tmp_path):
     filtered = "(document.getElementById('grade-filter').value='good', " \
                "document.getElementById('grade-filter').dispatchEvent(new Event('change')), " \
                "document.getElementById('count').textContent)"
+    # the ungraded ones, from disk too; and no grade button on a page opened from disk (read-only)
+    ungraded = "(document.getElementById('grade-filter').value='ungraded', " \
+               "document.getElementById('grade-filter').dispatchEvent(new Event('change')), " \
+               "Array.from(document.querySelectorAll('#photoshapes tbody tr:not([hidden])'), r => r.dataset.pair)" \
+               ".join(',') + ' ' + document.querySelectorAll('button, #review').length)"
     try:
         report = check_pages(pages, screenshot=tmp_path / "gallery.png",
-                             evaluate=[order, click, order, click, order, filtered])
+                             evaluate=[order, click, order, click, order, filtered, ungraded])
     except ProgramMissing as exc:
         pytest.skip(str(exc))
     assert problems(report) == []
@@ -80,10 +85,11 @@ def test_gallery_loads_in_chromium_and_sorts(tmp_path):
                                              for i in first["images"])
     pair_images = sum(len(p["images"]) for p in report["pages"][1:4])
     assert pair_images == 3 * 4  # exemplar, built-in and two renders per pair page
-    by_score, _, by_hog_asc, _, by_hog_desc, good_count = first["evaluated"]
+    by_score, _, by_hog_asc, _, by_hog_desc, good_count, ungraded_rows = first["evaluated"]
     assert by_score == "2,3,1"  # initial order: best score first
     assert by_hog_asc == "3,1,2" and by_hog_desc == "2,1,3"
     assert good_count == "1"
+    assert ungraded_rows == "3 0"  # pair 3 alone has no grade; no button
     assert (tmp_path / "gallery.png").stat().st_size > 1000
 
 

@@ -14,9 +14,17 @@
     const dir=th.dataset.dir==='1'?-1:(th.dataset.dir==='-1'?1:parseInt(th.dataset.first||'1'));
     sortBy(th,dir);}));
   const filter=document.getElementById('grade-filter'), text=document.getElementById('text-filter');
+  // "ungraded" keeps the rows without a grade; ?grade=LABEL or ?grade=ungraded opens the page filtered
+  const graded=(r,g)=>g==='ungraded'?!r.dataset.grade:r.dataset.grade===g;
   function apply(){const g=filter.value,t=text.value.toLowerCase();let shown=0;
-    rows().forEach(r=>{const ok=(!g||r.dataset.grade===g)&&(!t||r.textContent.toLowerCase().includes(t));
+    rows().forEach(r=>{const ok=(!g||graded(r,g))&&(!t||r.textContent.toLowerCase().includes(t));
       r.hidden=!ok; shown+=ok;}); document.getElementById('count').textContent=shown;}
-  filter.addEventListener('change',apply); text.addEventListener('input',apply);
+  function remember(){try{const url=new URL(location.href);
+    if(filter.value) url.searchParams.set('grade',filter.value); else url.searchParams.delete('grade');
+    history.replaceState(null,'',url);}catch(e){/* a file:// page may refuse: the filter still works */}}
+  const asked=new URLSearchParams(location.search).get('grade');
+  if(asked&&Array.from(filter.options).some(o=>o.value===asked)) filter.value=asked;
+  filter.addEventListener('change',()=>{apply();remember();}); text.addEventListener('input',apply);
+  apply();
   const initial=table.querySelector('th[data-key="score"]'); if(initial) sortBy(initial,-1);
 })();
