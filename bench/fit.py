@@ -39,9 +39,9 @@ def scratch_copy(data_root: Path, folder: Path, keep_calibration: bool) -> Path:
 
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.fit import LIGHTING_KEY
-    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY
-    from photoshape_flow.pipeline.fit_context import METHOD
+    from photoshape_flow.fitting.calibration import METRICS_KEY
+    from photoshape_flow.fitting.context import METHOD
+    from photoshape_flow.fitting.fit import LIGHTING_KEY
 
     source = data_root / "photoshape.db"
     if not source.is_file():
@@ -65,10 +65,10 @@ def probe(profile: str, pairs: int, overrides: list[str]) -> dict:
     """Runs the stage (this process is fresh) and returns its summary and timings."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
+    from photoshape_flow.fitting.fit import fit_pairs_of, run_fit
     from photoshape_flow.method_keys import MethodKey
-    from photoshape_flow.pipeline.fit import fit_pairs_of, run_fit
-    from photoshape_flow.pipeline.inference import resolve_classifier
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.recognition.inference import resolve_classifier
 
     cfg = resolve_profile(profile, overrides).profile.fit
     settings = get_settings()

@@ -97,8 +97,8 @@ def new_materials(profile: ProfileName | None = None, renders_per_material: int 
     """
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.fit_changes import fit_changes, fit_snapshot
-    from photoshape_flow.pipeline.new_materials import plan_material_rerun
+    from photoshape_flow.fitting.changes import fit_changes, fit_snapshot
+    from photoshape_flow.stages.new_materials import plan_material_rerun
     from photoshape_flow.stages.rerun import ORIGIN
 
     url = get_settings().resolved_database_url

@@ -40,12 +40,12 @@ _STAGE_REGISTRY = "the stage registry (flows, `photoshape status`) loads every s
 # Keep it short; every entry needs a reason that still holds (mitsuba is no reason: importing
 # `photoshape_flow.render` never starts it, `render.runtime.ensure_mitsuba` does on first use).
 LAZY_ALLOWED: dict[tuple[str, str], str] = {
-    (f"{PACKAGE}.stages.fit", f"{PACKAGE}.pipeline.fit"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.fit", f"{PACKAGE}.pipeline.inference"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.inference", f"{PACKAGE}.pipeline.inference"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.substances", f"{PACKAGE}.pipeline.substances"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.training", f"{PACKAGE}.pipeline.calibration"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.training", f"{PACKAGE}.pipeline.training"): _STAGE_REGISTRY,
+    (f"{PACKAGE}.fitting.fit_stage", f"{PACKAGE}.fitting.fit"): _STAGE_REGISTRY,
+    (f"{PACKAGE}.fitting.fit_stage", f"{PACKAGE}.recognition.inference"): _STAGE_REGISTRY,
+    (f"{PACKAGE}.recognition.inference_stage", f"{PACKAGE}.recognition.inference"): _STAGE_REGISTRY,
+    (f"{PACKAGE}.recognition.substances_stage", f"{PACKAGE}.recognition.substances"): _STAGE_REGISTRY,
+    (f"{PACKAGE}.recognition.training_stage", f"{PACKAGE}.recognition.calibration"): _STAGE_REGISTRY,
+    (f"{PACKAGE}.recognition.training_stage", f"{PACKAGE}.recognition.training"): _STAGE_REGISTRY,
     # `photoshape --help` reads the format registry (profiles, `export --format`); the writers load
     # numpy, PIL and the render specs only when a format is written (the module's docstring)
     (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.assignment"): "the CLI's start reads EXPORTERS; no numpy",
@@ -61,6 +61,13 @@ LAZY_ALLOWED: dict[tuple[str, str], str] = {
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("cli",),
     ("stages",),  # the registry: the composition root
+    ("scoring",),
+    ("publish",),
+    ("fitting",),
+    ("recognition",),
+    ("networks",),
+    ("alignment",),
+    ("ingest",),
     ("pipeline",),
     ("profiles",),
     ("db", "store"),
@@ -237,13 +244,13 @@ def _edge_lines(importer: str, imported: str) -> str:
 def test_the_parser_sees_the_package() -> None:
     """A guard against a test that passes because it reads nothing."""
     mods = modules()
-    assert f"{PACKAGE}.pipeline.fit" in mods and f"{PACKAGE}.cli" in mods and len(mods) > 150
+    assert f"{PACKAGE}.fitting.fit" in mods and f"{PACKAGE}.cli" in mods and len(mods) > 150
     assert any(e.importer == f"{PACKAGE}.stages.registry" and not e.local for e in edges())
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == ["a", "b", "c", "a"]
-    tree = ast.parse("from . import fit\nfrom .fit_context import X\nif TYPE_CHECKING:\n    import photoshape_flow.db\n"
+    tree = ast.parse("from . import fit\nfrom .context import X\nif TYPE_CHECKING:\n    import photoshape_flow.db\n"
                      "def f():\n    from ..store import blobstore\n")
-    got = [(t, local) for _, t, local in _imports(tree, f"{PACKAGE}.pipeline.fit_refine", False)]
-    assert got == [(f"{PACKAGE}.pipeline.fit", False), (f"{PACKAGE}.pipeline.fit_context", False),
+    got = [(t, local) for _, t, local in _imports(tree, f"{PACKAGE}.fitting.refine", False)]
+    assert got == [(f"{PACKAGE}.fitting.fit", False), (f"{PACKAGE}.fitting.context", False),
                    (f"{PACKAGE}.store.blobstore", True)]
 
 

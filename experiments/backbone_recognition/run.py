@@ -29,8 +29,8 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.devices import set_torch_threads
-from photoshape_flow.pipeline.bn_prior import photo_cases
-from photoshape_flow.pipeline.training import load_material_classifier, material_set, run_training
+from photoshape_flow.recognition.bn_prior import photo_cases
+from photoshape_flow.recognition.training import load_material_classifier, material_set, run_training
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -95,8 +95,8 @@ def substance_arm(settings: Any, store: BlobStore, spec: str, cases: list, subst
     preset name on a backbone ("backbone"), trained here on the bootstrap round.
     """
     from photoshape_flow.classify.substance_configs import get_config as substance_config
-    from photoshape_flow.pipeline.bn_prior import substance_readings
-    from photoshape_flow.pipeline.substances import load_substance_network, train_recogniser
+    from photoshape_flow.recognition.bn_prior import substance_readings
+    from photoshape_flow.recognition.substances import load_substance_network, train_recogniser
 
     started = time.perf_counter()
     if spec == "unet":

@@ -56,12 +56,12 @@ from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit import scene as sc
 from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
+from photoshape_flow.fitting import calibration as fc
+from photoshape_flow.fitting.context import FitContext, PairData
+from photoshape_flow.fitting.fit import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed
-from photoshape_flow.pipeline import fit_calibration as fc
-from photoshape_flow.pipeline.fit import candidates_of, lighting_estimate
-from photoshape_flow.pipeline.fit_context import FitContext, PairData
-from photoshape_flow.pipeline.inference import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
+from photoshape_flow.recognition.inference import resolve_classifier
 from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
 from photoshape_flow.render.specs import linear_to_srgb
 from photoshape_flow.store import BlobStore

@@ -122,7 +122,7 @@ def test_the_material_classifier_applies_its_prior_only_when_set() -> None:
 
 
 def test_the_choice_adopts_a_prior_only_beyond_noise() -> None:
-    from photoshape_flow.pipeline.bn_prior import choose
+    from photoshape_flow.recognition.bn_prior import choose
 
     rng = np.random.default_rng(9)
     groups = np.repeat(np.arange(30), 4)  # 30 renders, 4 regions each
@@ -140,7 +140,7 @@ def test_the_choice_adopts_a_prior_only_beyond_noise() -> None:
 
 def test_the_loss_the_choice_compares_is_blind_to_overconfidence() -> None:
     """A network made flatter (as adaptation can) gains raw log-loss, not tempered log-loss."""
-    from photoshape_flow.pipeline.bn_prior import tempered_log_loss
+    from photoshape_flow.recognition.bn_prior import tempered_log_loss
 
     rng = np.random.default_rng(0)
     truth = rng.integers(0, 5, 200)
@@ -163,9 +163,9 @@ def test_a_chosen_prior_enters_the_fit_calibrations_key_and_no_prior_leaves_it()
     from types import SimpleNamespace
 
     from photoshape_flow.db import models as m
-    from photoshape_flow.pipeline.fit_calibration import calibration_key
-    from photoshape_flow.pipeline.training import stored_bn_prior
+    from photoshape_flow.fitting.calibration import calibration_key
     from photoshape_flow.profiles import FitConfig
+    from photoshape_flow.recognition.training import stored_bn_prior
 
     def ctx(metrics: dict) -> SimpleNamespace:
         return SimpleNamespace(params={"code": "fit-7"}, cfg=FitConfig(), material_substance={1: "wood"},

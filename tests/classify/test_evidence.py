@@ -61,11 +61,11 @@ def test_the_former_callers_rank_a_region_alike(tmp_path: Path, settings_env: Pa
 
     import photoshape_flow.classify.dataset as dataset
     import photoshape_flow.db.session as db_session
-    import photoshape_flow.pipeline.calibration as calibration
-    import photoshape_flow.pipeline.fit_calibration as fit_calibration
-    import photoshape_flow.pipeline.training as training
+    import photoshape_flow.fitting.calibration as fit_calibration
+    import photoshape_flow.recognition.calibration as calibration
+    import photoshape_flow.recognition.training as training
     from photoshape_flow.cli import retrieve_cmd
-    from photoshape_flow.pipeline.inference import PartSubstanceView, _PartInput, _rank_part
+    from photoshape_flow.recognition.inference import PartSubstanceView, _PartInput, _rank_part
 
     image, ids, masks = scene()
     model, config, k = FakeClassifier(), {"architecture": "fake"}, 4  # a row config without min_region_fraction

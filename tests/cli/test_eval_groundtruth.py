@@ -27,8 +27,8 @@ from photoshape_flow.cli import app
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-from photoshape_flow.pipeline import evaluate as ev
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring import evaluate as ev
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 
 runner = CliRunner()

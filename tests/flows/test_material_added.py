@@ -174,7 +174,7 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import get_engine, session_scope
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
 
     get_settings.cache_clear()
     get_engine.cache_clear()

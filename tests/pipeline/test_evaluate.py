@@ -28,10 +28,10 @@ from tests.pipeline.aligned import plant_true_pair
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
-from photoshape_flow.pipeline import evaluate as ev
-from photoshape_flow.pipeline import rerender_eval
-from photoshape_flow.pipeline.evaluate import Metric
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring import evaluate as ev
+from photoshape_flow.scoring import rerender_eval
+from photoshape_flow.scoring.evaluate import Metric
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 
 # ground-truth parts of the photos: character -> (part name, material, substance)
@@ -730,8 +730,8 @@ def test_run_evaluation_passes_shape_recall_and_part_label_accuracy_through(
     seat and back can be right): CRF map right on 8 seat + 8 back pixels -> 16/43; the flow map only
     on the seat row -> 8/43; an empty coarse map -> 0.
     """
-    from photoshape_flow.pipeline.coarse.viewpoint_sets import ensure_viewpoint_set
-    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig
+    from photoshape_flow.alignment.coarse.viewpoint_sets import ensure_viewpoint_set
+    from photoshape_flow.alignment.coarse_alignment import CoarseConfig
 
     photos = {"photo": TRUTH, "photo2": ALL_SEAT, "photo3": ALL_SEAT}
     made = build_scene(db_url, store, tmp_path / "demo", photos, {"photo": PART_MAP},
@@ -833,7 +833,7 @@ def test_rerender_error_with_mitsuba_prefers_the_true_materials(tiny_demo: Path,
     than with a material of another substance on every part (measured RMSE 0.11 against 0.20; SSIM
     0.81 against 0.67); the photo's envmap and degradations are not the studio's, so never zero."""
     pytest.importorskip("mitsuba")
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
 
     ingest_tiny_demo(tiny_demo, 64)
     ingest_envmaps([sorted((tiny_demo / "envmaps").glob("studio*"))[0]], isolate=False)

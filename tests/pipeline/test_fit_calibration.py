@@ -51,9 +51,9 @@ def _fit_rows(url: str) -> dict[tuple[int, int], list[m.Assignment]]:
 def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str, store: BlobStore) -> None:
     from tests.pipeline.test_fit import _plant_pairs
 
-    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY, MODELS
-    from photoshape_flow.pipeline.training_renders import run_training_renders
+    from photoshape_flow.fitting.calibration import METRICS_KEY, MODELS
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.recognition.training_renders import run_training_renders
     from photoshape_flow.stages import StageContext
     from photoshape_flow.stages.run import run_stage
 

@@ -43,8 +43,8 @@ def retrieve(
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.models import Classifier, Material
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.calibration import stored_color_prior
-    from photoshape_flow.pipeline.training import load_material_classifier
+    from photoshape_flow.recognition.calibration import stored_color_prior
+    from photoshape_flow.recognition.training import load_material_classifier
     from photoshape_flow.store import default_store
 
     if crop not in ("image", "mask"):

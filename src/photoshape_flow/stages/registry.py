@@ -15,22 +15,20 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
+from photoshape_flow.alignment import coarse_alignment_stage as coarse_alignment
+from photoshape_flow.alignment import fine_alignment_stage as fine_alignment
+from photoshape_flow.fitting import fit_stage as fit
+from photoshape_flow.ingest import ingest_stage as ingest
 from photoshape_flow.pipeline import progress
+from photoshape_flow.pipeline.context import StageContext
+from photoshape_flow.pipeline.report import StageReport
+from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import Profile
-from photoshape_flow.stages import (
-    coarse_alignment,
-    fine_alignment,
-    fit,
-    inference,
-    ingest,
-    publish,
-    substances,
-    training,
-    training_renders,
-)
-from photoshape_flow.stages.context import StageContext
-from photoshape_flow.stages.report import StageReport
-from photoshape_flow.stages.work import WorkUnit
+from photoshape_flow.publish import publish_stage as publish
+from photoshape_flow.recognition import inference_stage as inference
+from photoshape_flow.recognition import substances_stage as substances
+from photoshape_flow.recognition import training_renders_stage as training_renders
+from photoshape_flow.recognition import training_stage as training
 
 
 @dataclass(frozen=True, repr=False)

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from photoshape_flow.pipeline.fit_changes import FitChanges, fit_changes, fit_snapshot
-from photoshape_flow.pipeline.new_materials import MaterialRerun
+from photoshape_flow.fitting.changes import FitChanges, fit_changes, fit_snapshot
+from photoshape_flow.pipeline.context import StageContext
+from photoshape_flow.pipeline.report import StageReport
 from photoshape_flow.profiles import ResolvedProfile, resolve_profile
-from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.new_materials import MaterialRerun
 from photoshape_flow.stages.registry import get_stage
-from photoshape_flow.stages.report import StageReport
 from photoshape_flow.stages.run import finish, finish_run, plan_batches, process, record_report, run_stage, start_run
 
 ORIGIN = "new-materials"  # `pipeline_run.origin` of a material-added re-run, CLI or flow
