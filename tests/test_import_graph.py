@@ -34,18 +34,11 @@ LIGHT: dict[str, tuple[str, ...]] = {
     f"{PACKAGE}.classify.color_prior": ("torch",),
 }
 
-_STAGE_REGISTRY = "the stage registry (flows, `photoshape status`) loads every stage module; this one imports torch"
 
 # Function-local imports of package modules allowed outside cli/: (importer, imported) -> why.
 # Keep it short; every entry needs a reason that still holds (mitsuba is no reason: importing
 # `photoshape_flow.render` never starts it, `render.runtime.ensure_mitsuba` does on first use).
 LAZY_ALLOWED: dict[tuple[str, str], str] = {
-    (f"{PACKAGE}.fitting.fit_stage", f"{PACKAGE}.fitting.fit"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.fitting.fit_stage", f"{PACKAGE}.recognition.inference"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.recognition.inference_stage", f"{PACKAGE}.recognition.inference"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.recognition.substances_stage", f"{PACKAGE}.recognition.substances"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.recognition.training_stage", f"{PACKAGE}.recognition.calibration"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.recognition.training_stage", f"{PACKAGE}.recognition.training"): _STAGE_REGISTRY,
     # `photoshape --help` reads the format registry (profiles, `export --format`); the writers load
     # numpy, PIL and the render specs only when a format is written (the module's docstring)
     (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.assignment"): "the CLI's start reads EXPORTERS; no numpy",

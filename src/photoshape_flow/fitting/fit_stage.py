@@ -6,20 +6,19 @@ Fans out over the pairs the newest material classifier ranked; the pipeline clai
 
 from __future__ import annotations
 
+from photoshape_flow.fitting.fit import fit_pairs_of, run_fit
 from photoshape_flow.method_keys import MethodKey
 from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport, blocked_by
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import FitConfig
+from photoshape_flow.recognition.inference import resolve_classifier
 
 NAME = "fit"
 
 
 def plan(ctx: StageContext, cfg: FitConfig) -> list[WorkUnit]:
     """The pairs with rows of the newest classifier (none before one is trained)."""
-    from photoshape_flow.fitting.fit import fit_pairs_of
-    from photoshape_flow.recognition.inference import resolve_classifier
-
     with ctx.session() as session:
         classifier = resolve_classifier(session)
         if classifier is None:
@@ -28,8 +27,6 @@ def plan(ctx: StageContext, cfg: FitConfig) -> list[WorkUnit]:
 
 
 def run(ctx: StageContext, cfg: FitConfig, work: WorkUnit | None = None) -> StageReport:
-    from photoshape_flow.fitting.fit import run_fit
-
     summary = run_fit(cfg, pair_ids=None if work is None else list(work.ids), settings=ctx.settings,
                       renderer=ctx.renderer, progress=ctx.progress, store=ctx.store)
     return StageReport(

@@ -14,6 +14,7 @@ from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.pipeline.report import StageReport, blocked_by
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import InferenceConfig
+from photoshape_flow.recognition.inference import resolve_classifier, run_inference
 
 NAME = "inference"
 log = logging.getLogger(__name__)
@@ -21,8 +22,6 @@ log = logging.getLogger(__name__)
 
 def methods_to_run(ctx: StageContext, cfg: InferenceConfig) -> list[str]:
     """The configured methods; the classifier only once one is trained."""
-    from photoshape_flow.recognition.inference import resolve_classifier
-
     out = []
     for method in cfg.methods:
         if method == "classifier":
@@ -50,8 +49,6 @@ def run(ctx: StageContext, cfg: InferenceConfig, work: WorkUnit | None = None) -
 
 
 def _run_method(ctx: StageContext, cfg: InferenceConfig, method: str, pair_ids: list[int] | None) -> StageReport:
-    from photoshape_flow.recognition.inference import run_inference
-
     summary = run_inference(method, pair_ids=pair_ids, top_k=cfg.top_k, settings=ctx.settings, progress=ctx.progress,
                             store=ctx.store)
     return StageReport(

@@ -13,6 +13,7 @@ from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import SubstancesConfig
+from photoshape_flow.recognition.substances import run_substances, train_and_assign
 from photoshape_flow.recognition.training_renders import run_training_renders
 from photoshape_flow.recognition.training_renders_stage import pool_versions
 
@@ -28,8 +29,6 @@ def versions(ctx: StageContext, cfg: SubstancesConfig, unit: WorkUnit) -> dict[i
 
 
 def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) -> StageReport:
-    from photoshape_flow.recognition.substances import run_substances
-
     if work is not None:
         return _bootstrap(ctx, cfg, work)
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
@@ -39,8 +38,6 @@ def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) 
 
 def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
     """After every bootstrap unit: the network (trained or resumed) and the parts' substances."""
-    from photoshape_flow.recognition.substances import train_and_assign
-
     summary = train_and_assign(ctx.settings, size=cfg.size, train_config=cfg.network, progress=ctx.progress,
                                store=ctx.store)
     return _report(summary, None)

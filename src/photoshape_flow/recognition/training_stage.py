@@ -11,14 +11,13 @@ from photoshape_flow.classify.configs import ClassifierConfig
 from photoshape_flow.db import models as m
 from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport
+from photoshape_flow.recognition.calibration import calibrate
+from photoshape_flow.recognition.training import run_training
 
 NAME = "training"
 
 
 def run(ctx: StageContext, cfg: ClassifierConfig, work: None = None) -> StageReport:
-    from photoshape_flow.recognition.calibration import calibrate
-    from photoshape_flow.recognition.training import run_training
-
     classifier_id = run_training(cfg, settings=ctx.settings, progress=ctx.progress, store=ctx.store)
     calibration = calibrate(ctx.settings, classifier_id, store=ctx.store)
     with ctx.session() as session:
