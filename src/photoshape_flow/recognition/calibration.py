@@ -30,13 +30,14 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.assignment import foreground_of_render, median_lab
 from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
-from photoshape_flow.classify.dataset import frame_object, load_label_map, load_rgb
+from photoshape_flow.classify.dataset import frame_object
 from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.classify.reliability import reliability
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.imaging.io import load_label_map, load_rgb
 from photoshape_flow.recognition.bn_prior import choose_bn_prior
 from photoshape_flow.recognition.substances import substance_temperature
 from photoshape_flow.recognition.training import load_material_classifier, stored_bn_prior, training_data
