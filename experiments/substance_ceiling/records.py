@@ -41,10 +41,11 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import newest_groundtruth
 from photoshape_flow.evaluation.groundtruth import GroundTruthFile, read_groundtruth_file
 from photoshape_flow.imaging.io import load_label_map, load_rgb
+from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
-from photoshape_flow.recognition.training import load_material_classifier, training_data
-from photoshape_flow.scoring.evaluate import majority_label, merge_labels, truth_labels
+from photoshape_flow.recognition.training import training_data
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring.truths import majority_label, merge_labels, truth_labels
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 

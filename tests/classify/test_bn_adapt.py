@@ -164,8 +164,8 @@ def test_a_chosen_prior_enters_the_fit_calibrations_key_and_no_prior_leaves_it()
 
     from photoshape_flow.db import models as m
     from photoshape_flow.fitting.calibration import calibration_key
+    from photoshape_flow.networks.calibrations import Calibration
     from photoshape_flow.profiles import FitConfig
-    from photoshape_flow.recognition.training import stored_bn_prior
 
     def ctx(metrics: dict) -> SimpleNamespace:
         return SimpleNamespace(params={"code": "fit-7"}, cfg=FitConfig(), material_substance={1: "wood"},
@@ -174,6 +174,7 @@ def test_a_chosen_prior_enters_the_fit_calibrations_key_and_no_prior_leaves_it()
     plain = calibration_key(ctx({}), [], 0)
     unadapted = {"bn_prior_choice": {"bn_prior": None, "regions": 10}}
     adapted = {"bn_prior_choice": {"bn_prior": 4.0, "regions": 10}}
-    assert stored_bn_prior(ctx(adapted).classifier) == 4.0 and stored_bn_prior(ctx(unadapted).classifier) is None
+    assert Calibration.of(ctx(adapted).classifier).bn_prior == 4.0
+    assert Calibration.of(ctx(unadapted).classifier).bn_prior is None
     assert calibration_key(ctx(unadapted), [], 0) == plain
     assert calibration_key(ctx(adapted), [], 0) != plain

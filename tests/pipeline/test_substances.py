@@ -143,7 +143,7 @@ def test_substances_stage_end_to_end_and_idempotent(
     assert assign_part_substances(get_settings(), classifier.id, network, 32, bn_prior=other)["skipped"] == 3
 
     # the part-level temperature: fit on held-out renders, cached, refit when they change
-    from photoshape_flow.recognition.substances import substance_temperature
+    from photoshape_flow.recognition.substance_temperature import substance_temperature
 
     settings = get_settings()
     first = substance_temperature(settings, classifier.id)

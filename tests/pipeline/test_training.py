@@ -15,8 +15,9 @@ from typer.testing import CliRunner
 from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
+from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.recognition import training as train_module  # run_training calls train_classifier from here
-from photoshape_flow.recognition.training import load_material_classifier, run_training
+from photoshape_flow.recognition.training import run_training
 
 TOY = {"oak": ("wood", (150, 90, 40)), "denim": ("fabric", (40, 60, 170)), "steel": ("metal", (120, 120, 130))}
 

@@ -1,6 +1,6 @@
 """Coarse alignment stage (section 4.1): viewpoint sets, descriptors, the reverse index, pairs.
 
-Three steps, each idempotent and incremental (the pieces live in `pipeline.coarse`):
+Three steps, each idempotent and incremental (the pieces live in `alignment.coarse`):
 
 1. `compute_view_features`: per shape, render the shaded viewpoint sweep and store one float16
    (views x dims) shard as a `ViewFeature` row; skipped when a row with the same params_hash exists.

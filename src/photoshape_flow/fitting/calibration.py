@@ -12,8 +12,8 @@ under val envmaps, true material of every part known from its spec) becomes a ca
    the render's own size instead, a photo is ~3x blurrier than an exemplar (D45);
 2. ranked by the classifier as inference ranks a part (material head, stored colour likelihood,
    and, since the substance network is not re-run on renders, the classifier's own substance head,
-   as `pipeline.calibration.posterior_reliability` does): the prior of the candidates;
-3. lit, given candidates, rendered and measured by the stage's own functions (`pipeline.fit_steps`:
+   as `recognition.calibration.posterior_reliability` does): the prior of the candidates;
+3. lit, given candidates, rendered and measured by the stage's own functions (`fitting.steps`:
    `lighting_estimate` over the training envmaps, not the render's own, `candidates_of`,
    `render_candidates`, `profiled_terms`) with the profile's hand-set weights, at the render's
    camera; each observed part whose true material is among its candidates is one `fit.calibrate.Case`.
@@ -22,8 +22,8 @@ Each blur of `fit.calibration_blurs` measures the same renders (rendered once, `
 blur and the model (every weight fitted, the hand-set weights with only their temperature fitted, or
 the hand-set weights as they are: `choices`) with the lowest cross-validated log-loss are kept and
 refitted on all that blur's cases (`fit.calibrate.fit`, centred on the hand-set weights, or
-`fit.calibrate.fit_temperature`) and stored in the
-classifier's `metrics["fit_calibration"]` with a key of everything they depend on (code, fit config,
+`fit.calibrate.fit_temperature`) and stored in the classifier's calibrations
+(`networks.calibrations.Calibration.fit`) with a key of everything they depend on (code, fit config,
 checkpoint, the sampled renders, enabled materials, training envmaps, exemplar size, seed), like the D24
 calibrations; `run_fit` computes them when the key changed and the stage then ranks with them. Two
 workers that start `fit` at once may both compute them: the result is deterministic, so they write
@@ -31,7 +31,7 @@ the same record. Reported with them: 2-fold cross-validated log-loss and top-1 (
 the hand-set cost, the hand-set cost with a fitted temperature, and the fitted cost.
 
 The sample of validation renders, the exemplars' size and the degradation (`validation_renders`,
-`exemplar_size`, `as_photo`) are `pipeline.validation_photos`'s, shared with the BatchNorm priors.
+`exemplar_size`, `as_photo`) are `networks.validation_photos`'s, shared with the BatchNorm priors.
 """
 
 from __future__ import annotations
@@ -45,7 +45,6 @@ from typing import Any
 
 import numpy as np
 
-from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -56,17 +55,17 @@ from photoshape_flow.fit.validation import frame, misalign, resampled, sample_mi
 from photoshape_flow.fitting.context import PairData
 from photoshape_flow.fitting.steps import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.networks.calibrations import Calibration
+from photoshape_flow.networks.classifiers import load_material_classifier
+from photoshape_flow.networks.evidence import stored_evidence
 from photoshape_flow.networks.validation_photos import as_photo, exemplar_size, validation_renders
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.recognition.calibration import stored_color_prior
-from photoshape_flow.recognition.training import load_material_classifier, stored_bn_prior
 from photoshape_flow.render import Camera
 from photoshape_flow.synth.spec import RenderSpec
 
 log = logging.getLogger(__name__)
 
 CODE_VERSION = "fit-calibration-3"  # 2: photos degraded at the exemplars' size (D45); 3: model chosen (D48)
-METRICS_KEY = "fit_calibration"  # classifier.metrics entry
 # what a calibration may keep (`choices`): every weight and the temperature fitted, the hand-set weights
 # with their temperature fitted, or the hand-set weights as they are (temperature 1)
 MODELS = ("fitted", "hand_set_temperature", "hand_set")
@@ -111,12 +110,11 @@ class RenderRanker:
         with session_scope(settings.resolved_database_url) as session:
             classifier = session.get(m.Classifier, row.id)
             assert classifier is not None
-            prior = stored_color_prior(session, ctx.store, self.model.materials, classifier)
-        self.evidence = ClassifierEvidence.for_classifier(self.model, row.config,
-                                                          enabled=frozenset(ctx.material_substance), color_prior=prior)
+            self.evidence = stored_evidence(session, ctx.store, classifier, self.model,
+                                            enabled=frozenset(ctx.material_substance))
 
     def rank(self, image: np.ndarray, masks: dict[int, np.ndarray]) -> dict[int, list[m.Assignment]]:
-        """Part index -> transient (never added) assignment rows, best first, as `pipeline.fit` reads them."""
+        """Part index -> transient (never added) assignment rows, best first, as `fitting.fit` reads them."""
         indices = sorted(masks)
         if not indices:
             return {}
@@ -212,7 +210,7 @@ def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int, photo_s
     The classifier's BatchNorm prior changes how it ranks the cases (`RenderRanker`); it enters only
     when one is chosen, so calibrations of classifiers that read photos as trained keep their keys.
     """
-    prior = stored_bn_prior(ctx.classifier)
+    prior = Calibration.of(ctx.classifier).bn_prior
     return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
                         "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed, "photo_size": photo_size,
                         "renders": [[r.kind, r.key, r.params_hash] for r in renders],
@@ -325,13 +323,13 @@ def ensure_calibration(ctx: Any, settings: Settings, progress: Progress | None =
         photo_size = exemplar_size(session) if ctx.cfg.calibration_at_exemplar_size else None
         key = calibration_key(ctx, renders, settings.seed, photo_size)
         classifier = session.get(m.Classifier, ctx.classifier.id)
-        stored = (classifier.metrics or {}).get(METRICS_KEY) if classifier is not None else None
+        found, stored = Calibration.of(classifier).fit_weights(key)
         session.expunge_all()
-    if isinstance(stored, dict) and stored.get("key") == key:
-        return stored.get("record")
+    if found:
+        return None if stored is None else dict(stored)
     record = fit_calibration(ctx, settings, renders, progress, photo_size) if renders else None
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, ctx.classifier.id)
         if classifier is not None:  # stored even when None: the hand-set fallback is not re-tried every run
-            classifier.metrics = {**(classifier.metrics or {}), METRICS_KEY: {"key": key, "record": record}}
+            Calibration.store(classifier, fit={"key": key, "record": record})
     return record

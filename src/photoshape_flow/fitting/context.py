@@ -1,7 +1,7 @@
 """What a fit run reads once and per pair: the run's context (classifier, materials, envmaps, renderer,
 fitted weights) and a pair's scene at the fit resolution with the classifier ranking it starts from.
 
-Kept apart from the stage's loop (`pipeline.fit`) because the calibration (`pipeline.fit_calibration`)
+Kept apart from the stage's loop (`fitting.fit`) because the calibration (`fitting.calibration`)
 and the experiments build the same context and pair data around validation renders.
 """
 
@@ -24,9 +24,9 @@ from photoshape_flow.fit.scene import FitScene, FrameRenderer
 from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.method_keys import FIT, MethodKey
+from photoshape_flow.networks.calibrations import material_lab
 from photoshape_flow.pipeline.render_inputs import material_spec
 from photoshape_flow.profiles import FitConfig
-from photoshape_flow.recognition.calibration import material_lab
 from photoshape_flow.recognition.inference import ALIGNMENT_METHOD
 from photoshape_flow.render import Camera, EnvmapSpec
 from photoshape_flow.render.factory import default_renderer
@@ -87,7 +87,7 @@ class FitContext:
         training = [e for e in envmaps if (e.split or "train") == "train"] or list(envmaps)
         self.envmaps = {e.id: e.blob for e in training}
         self._renderer = renderer
-        # fitted weights and temperature (`pipeline.fit_calibration`, D34); None: the profile's hand-set ones
+        # fitted weights and temperature (`fitting.calibration`, D34); None: the profile's hand-set ones
         self.calibration: dict[str, Any] | None = None
         self._frame: FrameRenderer | None = None
         self._features: FeatureMaps | None = None
@@ -126,7 +126,7 @@ class FitContext:
         return None if blob is None else EnvmapSpec(self.store.resolve(blob), rotation=rotation)
 
     def light_envmap(self, light: dict[str, Any]) -> Any:
-        """The render spec of an exemplar's stored lighting (`pipeline.fit_steps.lighting_estimate`): its training
+        """The render spec of an exemplar's stored lighting (`fitting.steps.lighting_estimate`): its training
         envmap at its rotation."""
         return self.envmap_spec(light.get("envmap_id"), float(light.get("rotation", 0.0)))
 

@@ -14,14 +14,14 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
    region (`fit.appearance.distance`) at the exposure that best explains the whole photo with that
    candidate (`fit.scene.select_profiled`), and the cost adds the ranking prior. The weights, the
    scores' temperature and the blur are fitted per classifier on validation renders
-   (`pipeline.fit_calibration`, D34) before the first pair; the profile's hand-set ones are the fallback.
+   (`fitting.calibration`, D34) before the first pair; the profile's hand-set ones are the fallback.
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
    classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
-5. Refinement (`pipeline.fit_refine`, `fit.refine`) of the winners of the pairs that are used
+5. Refinement (`fitting.refine`, `fit.refine`) of the winners of the pairs that are used
    (publish's and each exemplar's best): tint, roughness scale, UV scale and rotation on the rank-1
    rows' ``refinement``.
 
-The run's context and each pair's scene are read by `pipeline.fit_context` (shared with the
+The run's context and each pair's scene are read by `fitting.context` (shared with the
 calibration). Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they
 start from, the candidate set and the lighting key; a pair whose hash is unchanged is skipped, and
 pairs are claimed one at a time (`work_claim`, stage ``fit:<method_key>``) like inference's.
@@ -57,10 +57,11 @@ from photoshape_flow.fitting.context import (
 from photoshape_flow.fitting.refine import is_refined, refine_rows
 from photoshape_flow.fitting.steps import candidates_of, lighting_estimate, select_materials
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.networks.classifiers import resolve_classifier
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.progress_sink import Progress, counted
-from photoshape_flow.recognition.inference import IDENTITY_UV, resolve_classifier
+from photoshape_flow.recognition.inference import IDENTITY_UV
 from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
 
@@ -81,7 +82,7 @@ class FitSummary:
     rows: int = 0
     lightings: int = 0  # lighting estimates computed (not reused)
     changed: int = 0  # parts whose first material differs from the classifier's
-    refined: int = 0  # parts whose winner was refined (`pipeline.fit_refine`)
+    refined: int = 0  # parts whose winner was refined (`fitting.refine`)
     refined_pairs: int = 0
     # wall seconds per phase (calibration, reading, lighting, selection, refinement): issue 26 item 7's
     # budgets are per phase (selection per pair, lighting per exemplar, refinement per refined pair)
@@ -145,7 +146,7 @@ def exemplar_lighting(session: Session, ctx: FitContext, data: PairData) -> tupl
 def pair_hash(ctx: FitContext, data: PairData, candidates: dict[int, list[Candidate]], lighting_key: str,
               refine: bool = False) -> str:
     """The hash a pair's fit rows carry: config, code, the ranking they start from, the candidates, the lighting,
-    and whether its winners are refined (`pipeline.fit_refine`)."""
+    and whether its winners are refined (`fitting.refine`)."""
     return stable_hash({**ctx.params, "ranking": data.source_hash, "lighting": lighting_key, "refine": refine,
                         "candidates": {str(i): [c.material_id for c in cs] for i, cs in sorted(candidates.items())}})
 

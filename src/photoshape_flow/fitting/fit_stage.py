@@ -1,4 +1,4 @@
-"""Stage `fit`: each observed part's material chosen by rendering it against the photo (`pipeline.fit`).
+"""Stage `fit`: each observed part's material chosen by rendering it against the photo (`fitting.fit`).
 
 Fans out over the pairs the newest material classifier ranked; the pipeline claims each pair itself
 (keyed by the pair's own hash: candidates, lighting, config), so the generic batch claim is skipped.
@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from photoshape_flow.fitting.fit import fit_pairs_of, run_fit
 from photoshape_flow.method_keys import MethodKey
+from photoshape_flow.networks.classifiers import resolve_classifier
 from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport, blocked_by
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import FitConfig
-from photoshape_flow.recognition.inference import resolve_classifier
 
 NAME = "fit"
 

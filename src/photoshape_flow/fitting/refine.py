@@ -2,10 +2,10 @@
 
 Only the pairs that are used are refined (issue 26: refinement costs seconds per pair): those
 publish renders (rank up to `FitConfig.refine_max_rank` among the shape's exemplars) and each
-exemplar's best pair (the one that lights it, `pipeline.fit_context.reference_pair`); every other pair
+exemplar's best pair (the one that lights it, `fitting.context.reference_pair`); every other pair
 keeps the selection. The refinement is written on the rank-1 `fit` row of each refined part
 (``assignment.refinement``), and whether a pair is refined enters its params_hash
-(`pipeline.fit.pair_hash`), so a pair that becomes used is fitted again.
+(`fitting.fit.pair_hash`), so a pair that becomes used is fitted again.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """A pair's fit steps: its candidates, its lighting and its candidates' measured distances.
 
-The stage's loop (`pipeline.fit`) runs them on exemplars, the fit's calibration
-(`pipeline.fit_calibration`) on photo-like validation renders and the experiments on both, so they
-live below all three (on the context and pair data of `pipeline.fit_context`).
+The stage's loop (`fitting.fit`) runs them on exemplars, the fit's calibration
+(`fitting.calibration`) on photo-like validation renders and the experiments on both, so they
+live below all three (on the context and pair data of `fitting.context`).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Validation renders made to look like exemplars: the sample, the exemplars' size, the degradation.
 
 Both calibrations that read photo-like validation renders use these: the BatchNorm priors
-(`pipeline.bn_prior`, chosen by the substances and training stages) and the fit's weights
-(`pipeline.fit_calibration`). They sit below both, so neither stage imports the other's code.
+(`recognition.bn_prior`, chosen by the substances and training stages) and the fit's weights
+(`fitting.calibration`). They sit below both, so neither stage imports the other's code.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Stage: publish PhotoShapes (section 5.3): the renders and downloads of every candidate.
 
-For each candidate and method (`pipeline.photoshapes`: what a candidate is, how one is loaded and
+For each candidate and method (`publish.photoshapes`: what a candidate is, how one is loaded and
 which envmap lights it) this stage:
 
 1. renders the PhotoShape path traced under one studio envmap on a white background: the
@@ -13,7 +13,7 @@ which envmap lights it) this stage:
 3. exports the downloads (the chosen `export.formats`, the Mitsuba XML with the exemplar-view render's
    framed camera, film, spp and seed, so it renders that image again (`photoshapes.exemplar_render`), and
    `assignment.json`; see `export.bundle`) into ``<data_root>/exports/<method_key>/<pair_id>/``
-   (`pipeline.downloads`). Exports live in a folder, not the blob store, because the multi-file
+   (`publish.downloads`). Exports live in a folder, not the blob store, because the multi-file
    formats (XML + PLY + EXR, OBJ + MTL + PNG) only work with their relative paths intact and users
    download them as they are. A manifest ``<data_root>/exports/<method_key>/<pair_id>.json``
    records params_hash, status and error.
@@ -24,7 +24,7 @@ version), an export when its manifest says ok with the same hash. A failing item
 (``status="failed"`` row or manifest; a candidate whose inputs cannot be loaded, e.g. a missing map
 blob, on its exemplar-view row) and the batch goes on; a re-run retries it.
 
-The gallery built from these rows is `pipeline.gallery_site`; grades are `pipeline.grading`.
+The gallery built from these rows is `publish.gallery_site`; grades are `publish.grading`.
 """
 from __future__ import annotations
 

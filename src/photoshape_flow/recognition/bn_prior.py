@@ -16,7 +16,7 @@ the renders, `choose`); otherwise the network reads photos as trained:
   the validation renders that exist then (the bootstrap round's), read when it labels the parts.
 
 Each is stored in its network's `metrics` as `bn_prior_choice` (the prior and every candidate's
-log-loss), keyed by the checkpoint and the renders (`bn_prior_key`); `pipeline.training.stored_bn_prior`
+log-loss), keyed by the checkpoint and the renders (`bn_prior_key`); `networks.calibrations.Calibration.bn_prior`
 reads it back where a network is loaded.
 """
 
@@ -37,8 +37,9 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit.validation import misalign, resampled, sample_misalignment
 from photoshape_flow.hashing import item_seed, stable_hash
+from photoshape_flow.networks.calibrations import Calibration
+from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.networks.validation_photos import as_photo, exemplar_size, validation_renders
-from photoshape_flow.recognition.training import load_material_classifier
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCE_LABELS
@@ -218,12 +219,12 @@ def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | Non
     url = settings.resolved_database_url
     with session_scope(url) as session:
         row = session.get(m.Classifier, network_id)
-        metrics = dict(row.metrics or {}) if row is not None else {}
+        stored = Calibration.of(row)
         renders = sorted(f"{r.kind}/{r.key}" for r in validation_renders(session, count, settings.seed, kinds))
         key = stable_hash({"checkpoint": checkpoint, "renders": renders, "candidates": CANDIDATES,
                            "seed": settings.seed, "rule": "tempered, beyond noise"})
-        if metrics.get("bn_prior_key") == key and "bn_prior_choice" in metrics:
-            return dict(metrics["bn_prior_choice"])
+        if stored.bn_prior_key == key and stored.bn_prior_choice is not None:
+            return dict(stored.bn_prior_choice)
         cases = photo_cases(session, store, settings, count, kinds=kinds)
     readings = {prior: read(prior, cases) for prior in CANDIDATES}
     losses = {prior: region_losses(r) for prior, r in readings.items()}
@@ -237,5 +238,5 @@ def _choose_and_store(settings: Settings, network_id: int, checkpoint: str | Non
     with session_scope(url) as session:
         row = session.get(m.Classifier, network_id)
         if row is not None and row.checkpoint_blob == checkpoint:
-            row.metrics = {**(row.metrics or {}), "bn_prior_choice": result, "bn_prior_key": key}
+            Calibration.store(row, bn_prior_choice=result, bn_prior_key=key)
     return result

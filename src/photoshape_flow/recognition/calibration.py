@@ -5,7 +5,7 @@ Two numbers make the product of experts in `classify.ranking` weigh its experts 
 - the colour likelihood's sigma (how far lighting, UV scale and shading move a material's median
   colour), fit by robust maximum likelihood on the validation training renders, cached in the
   material classifier's `metrics` (`color_sigma`, keyed by those renders and the material colours);
-- each substance network's part-level temperature (`pipeline.substances.substance_temperature`),
+- each substance network's part-level temperature (`recognition.substance_temperature`),
   fit on the validation renders of both rounds and cached in that network's `metrics`.
 
 Then it checks the result: `posterior_reliability` ranks the material regions of the validation
@@ -28,8 +28,7 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.classify.assignment import foreground_of_render, median_lab
-from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.classify.color_prior import fit_color_sigma, region_color_distances
 from photoshape_flow.classify.dataset import frame_object
 from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.classify.reliability import reliability
@@ -38,9 +37,12 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.imaging.io import load_label_map, load_rgb
+from photoshape_flow.networks.calibrations import Calibration, material_labs
+from photoshape_flow.networks.classifiers import load_material_classifier, substance_networks
+from photoshape_flow.networks.evidence import stored_evidence
 from photoshape_flow.recognition.bn_prior import choose_bn_prior
-from photoshape_flow.recognition.substances import substance_temperature
-from photoshape_flow.recognition.training import load_material_classifier, stored_bn_prior, training_data
+from photoshape_flow.recognition.substance_temperature import substance_temperature
+from photoshape_flow.recognition.training import training_data
 from photoshape_flow.store import BlobStore, default_store
 
 log = logging.getLogger(__name__)
@@ -62,66 +64,15 @@ def fit_classifier_color_sigma(
     data = training_data(session, store)
     key = stable_hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
                        "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
-    metrics = dict(classifier.metrics or {}) if classifier is not None else {}
-    if classifier is not None and metrics.get("color_sigma_key") == key:
-        cached = metrics.get("color_sigma")
-        return None if cached is None else float(cached)
+    stored = Calibration.of(classifier)
+    if classifier is not None and stored.color_sigma_key == key:
+        return stored.color_sigma
     sigma = fit_color_sigma(region_color_distances(data.val, material_labs, limit=COLOR_SIGMA_RENDERS))
     log.info("colour likelihood sigma %s (CIELAB, fit on %d validation renders)",
              f"{sigma:.2f}" if sigma else "none", min(len(data.val), COLOR_SIGMA_RENDERS))
     if classifier is not None:
-        classifier.metrics = {**metrics, "color_sigma": sigma, "color_sigma_key": key}
+        Calibration.store(classifier, color_sigma=sigma, color_sigma_key=key)
     return sigma
-
-
-def material_labs(session: Session, store: BlobStore, materials: Sequence[int]) -> dict[int, np.ndarray]:
-    """Median CIELAB colour of each of `materials` that has one (`material_lab`)."""
-    rows = session.execute(sa.select(m.Material).where(m.Material.id.in_([int(x) for x in materials]))).scalars()
-    return {mat.id: lab for mat in rows if (lab := material_lab(mat, store)) is not None}
-
-
-def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
-    """Median CIELAB colour of a material's render (its preview), else of its albedo."""
-    if material.preview_blob and store.exists(material.preview_blob):
-        image = store.load_image(material.preview_blob)
-        alpha = image[..., 3] / 255.0 if image.ndim == 3 and image.shape[2] == 4 else None
-        rgb = image[..., :3]
-        if rgb.dtype != np.uint8:
-            rgb = (np.clip(rgb.astype(np.float64) / np.iinfo(rgb.dtype).max, 0, 1) * 255).astype(np.uint8)
-        return median_lab(rgb, foreground_of_render(rgb, alpha))
-    albedo = (material.maps or {}).get("albedo")
-    if albedo and store.exists(albedo):
-        return median_lab(store.load_image(albedo)[..., :3])
-    color = (material.params or {}).get("albedo")
-    if color is not None:
-        rgb = (np.clip(np.asarray(color, np.float64), 0, 1) * 255).astype(np.uint8).reshape(1, 1, 3)
-        return median_lab(rgb)
-    return None
-
-
-def stored_color_prior(
-    session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier
-) -> tuple[np.ndarray, float] | None:
-    """(material colours in `materials` order, the classifier's stored sigma); None when not calibrated."""
-    sigma = (classifier.metrics or {}).get("color_sigma")
-    if sigma is None:
-        return None
-    labs = material_labs(session, store, materials)
-    return (material_lab_matrix(materials, labs), float(sigma)) if labs else None
-
-
-def stored_temperature(session: Session, network_id: int) -> float | None:
-    """A substance network's stored part-level temperature (None: not fitted, or too few parts)."""
-    row = session.get(m.Classifier, network_id)
-    value = (row.metrics or {}).get("part_temperature") if row is not None else None
-    return None if value is None else float(value)
-
-
-def substance_networks(session: Session) -> list[int]:
-    """The substance networks whose part substances weight the ranking."""
-    return sorted(int(n) for n in session.execute(
-        sa.select(m.PartSubstance.classifier_id).where(m.PartSubstance.classifier_id.is_not(None)).distinct()
-    ).scalars())
 
 
 def calibrate(settings: Settings, classifier_id: int, store: BlobStore | None = None) -> dict[str, Any]:
@@ -158,15 +109,14 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
         data = training_data(session, store)
         classifier = session.get(m.Classifier, classifier_id)
         assert classifier is not None
-        metrics = dict(classifier.metrics or {})
+        stored = Calibration.of(classifier)
         key = stable_hash({"checkpoint": row.checkpoint_blob, "renders": data.hash, "limit": limit,
-                           "sigma": metrics.get("color_sigma"),
-                           **({"bn_prior": prior} if (prior := stored_bn_prior(classifier)) is not None else {})})
-        if metrics.get("posterior_key") == key and "posterior_reliability" in metrics:
-            return dict(metrics["posterior_reliability"])
-        prior = stored_color_prior(session, store, model.materials, classifier)
+                           "sigma": stored.color_sigma,
+                           **({"bn_prior": prior} if (prior := stored.bn_prior) is not None else {})})
+        if stored.posterior_key == key and stored.posterior_reliability is not None:
+            return dict(stored.posterior_reliability)
         enabled = frozenset(session.execute(sa.select(m.Material.id).where(m.Material.enabled)).scalars())
-    evidence = ClassifierEvidence.for_classifier(model, row.config, enabled=enabled, color_prior=prior)
+        evidence = stored_evidence(session, store, classifier, model, enabled=enabled)
     framed = bool((row.config or {}).get("frame_object"))
     confidence, correct = _ranked_regions(model, evidence, data.val[:limit], framed)
     result = reliability(np.asarray(confidence), np.asarray(correct)).to_dict()
@@ -175,8 +125,7 @@ def posterior_reliability(settings: Settings, classifier_id: int, limit: int = P
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, classifier_id)
         if classifier is not None and classifier.checkpoint_blob == row.checkpoint_blob:
-            classifier.metrics = {**(classifier.metrics or {}), "posterior_ece": result["ece"],
-                                  "posterior_reliability": result, "posterior_key": key}
+            Calibration.store(classifier, posterior_reliability=result, posterior_key=key)
     return result
 
 

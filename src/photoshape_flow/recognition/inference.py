@@ -45,14 +45,10 @@ from photoshape_flow.devices import set_torch_threads
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.method_keys import MethodKey
+from photoshape_flow.networks.calibrations import Calibration, material_lab, stored_temperature
+from photoshape_flow.networks.classifiers import resolve_classifier, substance_networks
+from photoshape_flow.networks.evidence import stored_evidence
 from photoshape_flow.progress_sink import Progress, no_progress
-from photoshape_flow.recognition.calibration import (
-    material_lab,
-    stored_color_prior,
-    stored_temperature,
-    substance_networks,
-)
-from photoshape_flow.recognition.training import stored_bn_prior
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.priors import empirical_prior, name_prior, restrict
 from photoshape_flow.vocab import SUBSTANCES
@@ -92,21 +88,6 @@ class PartSubstanceView:
     probs: dict[str, float]
     observed: bool
     network: int | None = None  # the substance network (classifier id) behind `probs`, when one is
-
-
-def resolve_classifier(session: Session, classifier_id: int | None = None) -> m.Classifier | None:
-    """The given material classifier, or the newest one that finished training."""
-    if classifier_id is not None:
-        clf = session.get(m.Classifier, classifier_id)
-        if clf is None or clf.kind != "material":
-            raise ValueError(f"classifier {classifier_id} is not a material classifier")
-        return clf
-    return session.execute(
-        sa.select(m.Classifier)
-        .where(m.Classifier.kind == "material", m.Classifier.status == "ok")
-        .order_by(m.Classifier.id.desc())
-        .limit(1)
-    ).scalar_one_or_none()
 
 
 def pair_hashes(session: Session, params_hash: str, pair_ids: Sequence[int] | None = None) -> dict[int, str]:
@@ -170,7 +151,7 @@ class _Context:
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
             set_torch_threads(settings.torch_threads)
-            self.bn_prior = stored_bn_prior(classifier)
+            self.bn_prior = Calibration.of(classifier).bn_prior
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device,
                                          bn_prior=self.bn_prior)
         self.material_labs: dict[int, np.ndarray] = {}
@@ -180,13 +161,15 @@ class _Context:
                 if lab is not None:
                     self.material_labs[mat.id] = lab
         self.color_sigma: float | None = None
-        prior: tuple[np.ndarray, float] | None = None
-        if method == "classifier" and color_prior:
-            assert self.model is not None and classifier is not None
-            prior = stored_color_prior(session, store, self.model.materials, classifier)
-            if prior is not None:
-                self.color_sigma = prior[1]
-            else:
+        self.evidence: ClassifierEvidence | None = None
+        if self.model is not None:
+            assert classifier is not None
+            # materials disabled since training can neither be chosen nor lend their substance mass
+            self.evidence = stored_evidence(session, store, classifier, self.model,
+                                            enabled=frozenset(self.material_substance), color=color_prior)
+            if self.evidence.color_prior is not None:
+                self.color_sigma = self.evidence.color_prior[1]
+            elif color_prior:
                 log.warning("classifier %s: no stored colour sigma (the training stage fits it) or no material "
                             "colours: ranking without the colour likelihood", classifier.id)
         # part-level temperature of each substance network whose rows weight the ranking (fit by training)
@@ -194,13 +177,6 @@ class _Context:
         if method == "classifier" and calibrate_substances:
             for network in substance_networks(session):
                 self.substance_temperatures[network] = stored_temperature(session, network)
-        self.evidence: ClassifierEvidence | None = None
-        if self.model is not None:
-            assert classifier is not None
-            # materials disabled since training can neither be chosen nor lend their substance mass
-            self.evidence = ClassifierEvidence.for_classifier(self.model, classifier.config,
-                                                              enabled=frozenset(self.material_substance),
-                                                              color_prior=prior)
 
     @property
     def params(self) -> dict[str, Any]:

@@ -9,12 +9,13 @@ from __future__ import annotations
 import logging
 
 from photoshape_flow.db import models as m
+from photoshape_flow.networks.classifiers import resolve_classifier
 from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.pipeline.report import StageReport, blocked_by
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import InferenceConfig
-from photoshape_flow.recognition.inference import resolve_classifier, run_inference
+from photoshape_flow.recognition.inference import run_inference
 
 NAME = "inference"
 log = logging.getLogger(__name__)

@@ -33,8 +33,6 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
-from photoshape_flow.classify.infer import load_classifier
-from photoshape_flow.classify.substance_calibration import fit_temperature, nll, part_calibration_set
 from photoshape_flow.classify.substance_configs import SubstanceTrainConfig, get_config
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_recognition import recogniser_config, substance_map
@@ -52,9 +50,10 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.progress_sink import Progress, counted, no_progress
 from photoshape_flow.recognition.bn_prior import choose_substance_bn_prior
-from photoshape_flow.recognition.training import load_material_classifier, run_training, stored_bn_prior
+from photoshape_flow.recognition.training import run_training
 from photoshape_flow.recognition.training_renders import run_training_renders
 from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
@@ -88,7 +87,7 @@ def load_bootstrap_data(session: sa.orm.Session, store: BlobStore) -> tuple[Any,
             continue
         try:
             image = store.load_image(beauty)[..., :3]
-            label = _load_label_map(store, labels)
+            label = load_label_blob(store, labels)
         except (OSError, ValueError) as exc:
             log.warning("bootstrap rendering %s: %s; skipped", key, exc)
             continue
@@ -102,7 +101,7 @@ def load_bootstrap_data(session: sa.orm.Session, store: BlobStore) -> tuple[Any,
     return train, val, stable_hash(signature)
 
 
-def _load_label_map(store: BlobStore, ref: str) -> np.ndarray:
+def load_label_blob(store: BlobStore, ref: str) -> np.ndarray:
     array = store.load_array(ref) if ref.endswith(".npy") else store.load_image(ref)
     if array.ndim != 2:
         raise ValueError(f"blob {ref}: label map must be single-channel, got shape {array.shape}")
@@ -203,96 +202,6 @@ def train_recogniser(settings: Settings, config: SubstanceTrainConfig, *, progre
     return classifier_id, model, info
 
 
-def load_substance_network(row: Any, store: BlobStore, device: str) -> Any:
-    """The network of a substance row: the segmentation net, or the part recogniser (`MaterialClassifier`)."""
-    data = store.read_bytes(row.checkpoint_blob)
-    if (row.config or {}).get("arch", "unet") != "unet":
-        return load_classifier(data, device=device)
-    return load_model(checkpoint_from_bytes(data), resolve_device(device))
-
-
-# -- calibration --------------------------------------------------------------------------------------
-
-CALIBRATION_RENDERS = 600  # renders read to fit the part-level temperature (evenly spread over those held out)
-CALIBRATION_KINDS: tuple[str, ...] = ("bootstrap", "training")  # rounds whose validation renders calibrate
-
-
-def calibration_renders(session: sa.orm.Session, limit: int = CALIBRATION_RENDERS) -> list[tuple[str, dict]]:
-    """(key, blobs) of validation renders of every round: shapes and envmaps the network never saw.
-
-    The split is by shape and envmap and the same in every round, so the later rounds' validation
-    renders are as unseen as the bootstrap's (their training renders are not: they show the shapes
-    the network trained on, and would make it look better calibrated than it is on new shapes).
-    At most `limit`, evenly spread over the sorted keys (every round represented, the choice stable).
-    """
-    rows = session.execute(
-        sa.select(m.Rendering.kind, m.Rendering.key, m.Rendering.blobs)
-        .where(m.Rendering.status == STATUS_OK, ~m.Rendering.exclude, m.Rendering.split == "val",
-               m.Rendering.kind.in_(CALIBRATION_KINDS))
-        .order_by(m.Rendering.kind, m.Rendering.key)
-    ).all()
-    if len(rows) > limit:
-        rows = [rows[i] for i in np.linspace(0, len(rows) - 1, limit).round().astype(int)]
-    return [(f"{kind}/{key}", blobs or {}) for kind, key, blobs in rows]
-
-
-def substance_temperature(settings: Settings, classifier_id: int, store: BlobStore | None = None) -> float | None:
-    """Part-level temperature of a substance network (`classify.substance_calibration`).
-
-    Fit on renders of shapes and envmaps the network never trained on (`calibration_renders`: the
-    validation renders of the bootstrap and training rounds, with exact part and substance labels)
-    and cached in its row's `metrics` (`part_temperature`, the parts used, part accuracy and NLL
-    before and after, and a key of the renders used): refit only when those renders change, and
-    a retrained network writes new metrics. None: too few parts to fit (the raw confidence is used).
-    """
-    url = settings.resolved_database_url
-    store = store if store is not None else default_store(settings)
-    with session_scope(url) as session:
-        row = session.get(m.Classifier, classifier_id)
-        if row is None or row.kind != "substance" or not row.checkpoint_blob:
-            return None
-        metrics = dict(row.metrics or {})
-        renders = calibration_renders(session)
-        bn_prior = stored_bn_prior(row)  # the parts were labelled with it: calibrate what they saw
-        cache_key = stable_hash([row.checkpoint_blob, [key for key, _ in renders],
-                                 *([] if bn_prior is None else [bn_prior])])
-        if metrics.get("part_temperature_key") == cache_key:
-            value = metrics.get("part_temperature")
-            return None if value is None else float(value)
-        size = int((row.config or {}).get("size") or 128)
-        checkpoint_ref = row.checkpoint_blob
-        session.expunge(row)
-    model = load_substance_network(row, store, settings.device)  # outside the session: a blob read
-    predictions = []
-    for key, blobs in renders:
-        try:
-            image = store.load_image(blobs["beauty"])
-            part_ids = _load_label_map(store, blobs["part_ids"]).astype(np.int64)
-            substance_ids = _load_label_map(store, blobs["substance_ids"]).astype(np.int64)
-            probs = substance_map(model, image[..., :3], part_ids, size, bn_prior=bn_prior)
-            if probs.shape[1:] != part_ids.shape:
-                probs = _resize_probs(probs, part_ids.shape)
-        except (KeyError, OSError, ValueError) as exc:
-            log.warning("rendering %s: %s; not used for calibration", key, exc)
-            continue
-        predictions.append((probs, part_ids, substance_ids))
-    calibration = part_calibration_set(predictions)
-    temperature = fit_temperature(calibration.probs, calibration.truth)
-    info: dict[str, Any] = {"part_temperature": temperature, "part_temperature_parts": len(calibration),
-                            "part_temperature_renders": len(predictions), "part_temperature_key": cache_key}
-    if len(calibration):
-        info["part_accuracy"] = float((calibration.probs.argmax(axis=1) == calibration.truth).mean())
-        info["part_nll"] = nll(calibration.probs, calibration.truth)
-        info["part_nll_tempered"] = nll(calibration.probs, calibration.truth, temperature or 1.0)
-    with session_scope(url) as session:
-        row = session.get(m.Classifier, classifier_id)
-        if row is not None and row.checkpoint_blob == checkpoint_ref:
-            row.metrics = {**(row.metrics or {}), **info}
-    log.info("substance network %s: part temperature %s from %d parts of %d held-out renders", classifier_id,
-             "none" if temperature is None else f"{temperature:.3f}", len(calibration), len(predictions))
-    return temperature
-
-
 # -- part substances ----------------------------------------------------------------------------------
 
 
@@ -303,7 +212,7 @@ def assign_part_substances(
     """PartSubstance rows for every pair with an ok flow-crf alignment (skipping up-to-date pairs).
 
     `bn_prior`: the network reads each photo with its BatchNorm statistics mixed with the photo's
-    (`classify.bn_adapt`, chosen by `pipeline.bn_prior`; None: as trained).
+    (`classify.bn_adapt`, chosen by `recognition.bn_prior`; None: as trained).
     """
     url = settings.resolved_database_url
     store = store if store is not None else default_store(settings)
@@ -348,13 +257,13 @@ def assign_part_substances(
         try:
             if not image_blob:
                 raise ValueError("exemplar has no image blob")
-            part_map = _load_label_map(store, crf_blob).astype(np.int64)
+            part_map = load_label_blob(store, crf_blob).astype(np.int64)
             image = store.load_image(image_blob)
             if image.ndim == 2:
                 image = np.repeat(image[..., None], 3, axis=2)
             probs = substance_map(model, image[..., :3], part_map, size, bn_prior=bn_prior)
             if probs.shape[1:] != part_map.shape:
-                probs = _resize_probs(probs, part_map.shape)
+                probs = resize_probs(probs, part_map.shape)
             results = part_substances(part_map, probs, [index for _, index in parts], min_pixels=min_pixels)
         except Exception as exc:
             message = f"pair {pair_id}: {type(exc).__name__}: {exc}"
@@ -392,7 +301,7 @@ def part_probs(result: Any, map_ref: str) -> dict[str, Any]:
     return probs
 
 
-def _resize_probs(probs: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+def resize_probs(probs: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     import cv2
 
     h, w = int(shape[0]), int(shape[1])

@@ -37,7 +37,6 @@ from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.backbone import backbone_record
 from photoshape_flow.classify.configs import ClassifierConfig, config_hash, get_config
 from photoshape_flow.classify.dataset import RegionDataset, RenderItem, find_regions
-from photoshape_flow.classify.infer import load_classifier
 from photoshape_flow.classify.networks import build_network
 from photoshape_flow.classify.resnet import grow_material_head
 from photoshape_flow.classify.train import history_entry, select_best, train_classifier
@@ -49,6 +48,7 @@ from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
+from photoshape_flow.networks.classifiers import newest_material_classifier
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.store import BlobStore, default_store
@@ -136,50 +136,6 @@ def training_data(
     return TrainingData(tuple(train), tuple(val), stable_hash(manifest), source)
 
 
-def newest_material_classifier(session: Session) -> Classifier | None:
-    """The newest ok material classifier (highest id), as the SQL views pick it."""
-    return session.scalars(
-        sa.select(Classifier)
-        .where(Classifier.kind == "material", Classifier.status == STATUS_OK, Classifier.checkpoint_blob.is_not(None))
-        .order_by(Classifier.id.desc())
-        .limit(1)
-    ).first()
-
-
-def stored_bn_prior(classifier: Classifier | None) -> float | None:
-    """The chosen prior on a network's row (None: not chosen, or no adaptation won)."""
-    choice = (classifier.metrics or {}).get("bn_prior_choice") if classifier is not None else None
-    value = choice.get("bn_prior") if isinstance(choice, dict) else None
-    return None if value is None else float(value)
-
-
-def load_material_classifier(
-    classifier_id: int | None = None, settings: Settings | None = None, device: str | None = None,
-    kind: str = "material", store: BlobStore | None = None,
-) -> tuple[Classifier, Any]:
-    """(row, `MaterialClassifier`) for `classifier_id` or the newest ok material classifier.
-
-    The model reads photos with the BatchNorm prior chosen for it (`pipeline.bn_prior`), if any.
-    ``kind="substance"`` loads the substances stage's part recogniser (same network family) by id.
-    """
-    settings = settings or get_settings()
-    with session_scope(settings.resolved_database_url) as session:
-        if classifier_id is None:
-            row = newest_material_classifier(session)
-            if row is None:
-                raise LookupError("no trained material classifier (status ok); run the training stage first")
-        else:
-            row = session.get(Classifier, classifier_id)
-            if row is None or row.kind != kind:
-                raise LookupError(f"classifier {classifier_id}: no such {kind} classifier")
-            if row.status != STATUS_OK or not row.checkpoint_blob:
-                raise LookupError(f"classifier {classifier_id}: status {row.status}, not usable")
-        session.expunge(row)
-    store = store if store is not None else default_store(settings)
-    return row, load_classifier(store.read_bytes(row.checkpoint_blob), device=device or settings.device,
-                                bn_prior=stored_bn_prior(row))
-
-
 def _parent_candidate(
     session: Session, config: ClassifierConfig, materials: MaterialSet, finetune_from: int | None
 ) -> Classifier | None:
@@ -192,11 +148,7 @@ def _parent_candidate(
                 f"classifier {finetune_from}: architecture {parent.architecture} differs from {config.architecture}"
             )
         return parent
-    newest = session.scalars(
-        sa.select(Classifier)
-        .where(Classifier.kind == "material", Classifier.status == STATUS_OK, Classifier.checkpoint_blob.is_not(None))
-        .order_by(Classifier.id.desc())
-    ).first()
+    newest = newest_material_classifier(session)
     if newest is None or newest.architecture != config.architecture:
         return None
     old = {int(m) for m in (newest.materials or [])[1:]}

@@ -1,6 +1,6 @@
 """Stage `training` (section 5.2): train, resume, or fine-tune the material classifier, then calibrate.
 
-Calibration (`pipeline.calibration`: the colour likelihood's sigma on the classifier's row, each
+Calibration (`recognition.calibration`: the colour likelihood's sigma on the classifier's row, each
 substance network's part temperature on its row) runs here, not in inference, because the substance
 temperature needs the training round's validation renders and inference must only read.
 """

@@ -1,9 +1,9 @@
 """The material-added re-run in this process: what `photoshape new-materials` runs.
 
-The plan is `pipeline.new_materials.plan_material_rerun` (fit then publish of the affected pairs, no
+The plan is `stages.new_materials.plan_material_rerun` (fit then publish of the affected pairs, no
 retraining); the `new-materials` flow runs the same plan through the stage flows. Each stage goes
 through the claims like any `photoshape run`; the fit report's details carry the changed-parts
-counts (`pipeline.fit_changes`), recorded with the run in `pipeline_run`.
+counts (`fitting.changes`), recorded with the run in `pipeline_run`.
 """
 
 from __future__ import annotations

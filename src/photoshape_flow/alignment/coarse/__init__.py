@@ -1,4 +1,4 @@
-"""The pieces of the coarse alignment stage; `pipeline.coarse_alignment` composes them into the stage.
+"""The pieces of the coarse alignment stage; `alignment.coarse_alignment` composes them into the stage.
 
 - `config`: `CoarseConfig`, the stage's parameters (its hashes are stored with the rows).
 - `viewpoint_sets`: the immutable `ViewpointSet` rows and the feature hashes that depend on them.
