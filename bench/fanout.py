@@ -41,8 +41,8 @@ def build(root: Path) -> None:
     from photoshape_flow.db import migrate
     from photoshape_flow.db.session import get_engine
     from photoshape_flow.demo import generate_demo
+    from photoshape_flow.ingest.ingest_stage import IngestRequest
     from photoshape_flow.stages import run_all
-    from photoshape_flow.stages.ingest import IngestRequest
 
     demo = root.parent / "demo-input"
     generate_demo(demo, "tiny", seed=3)

@@ -123,14 +123,14 @@ def evaluate(pairs: list[dict], coarse_maps: list[np.ndarray], params: FineParam
 
 def demo_measurement(demo_size: str, work: Path, size: int, methods: list[str]) -> dict:
     """The whole chain on the demo collection; per flow candidate, evaluate_fine_alignment's result."""
+    from photoshape_flow.alignment.coarse_alignment import run_coarse_alignment
+    from photoshape_flow.alignment.fine_alignment import evaluate_fine_alignment, run_fine_alignment
     from photoshape_flow.config import Settings
     from photoshape_flow.db import migrate
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.demo.generate import generate_demo
     from photoshape_flow.demo.groundtruth import load_groundtruth
-    from photoshape_flow.pipeline.coarse_alignment import run_coarse_alignment
-    from photoshape_flow.pipeline.fine_alignment import evaluate_fine_alignment, run_fine_alignment
-    from photoshape_flow.pipeline.ingest import ingest_exemplars, ingest_shapes
+    from photoshape_flow.ingest.ingest import ingest_exemplars, ingest_shapes
     from photoshape_flow.render import Renderer
 
     settings = Settings(data_root=work / "data")

@@ -9,7 +9,7 @@ medium demo. A generated scene cannot stand for them (the cost depends on the co
 materials, envmaps and on which pairs are used), so the bench re-runs the real stage on a copy of a
 real data root: DIR's SQLite database is copied to a scratch folder, the copy loses its fit rows,
 its stored lightings and its fit claims (and, with ``--calibration``, the stored weight calibration,
-which is otherwise reused: it is computed once per classifier and config), and `pipeline.fit.run_fit`
+which is otherwise reused: it is computed once per classifier and config), and `fitting.fit.run_fit`
 runs on the copy's first N pairs (all by default) in a fresh process reading DIR's blobs. The stage's
 own per-phase timers (`FitSummary.seconds`) give the split; the process's wall time from its start
 (imports, Mitsuba's start, Dr.Jit's kernels from the on-disk cache) gives the cold-process cost.
@@ -39,9 +39,9 @@ def scratch_copy(data_root: Path, folder: Path, keep_calibration: bool) -> Path:
 
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.fit import LIGHTING_KEY
-    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY
-    from photoshape_flow.pipeline.fit_context import METHOD
+    from photoshape_flow.fitting.context import METHOD
+    from photoshape_flow.fitting.fit import LIGHTING_KEY
+    from photoshape_flow.networks.calibrations import Calibration
 
     source = data_root / "photoshape.db"
     if not source.is_file():
@@ -56,8 +56,7 @@ def scratch_copy(data_root: Path, folder: Path, keep_calibration: bool) -> Path:
                 exemplar.meta = {k: v for k, v in exemplar.meta.items() if k != LIGHTING_KEY}
         if not keep_calibration:
             for classifier in session.execute(sa.select(m.Classifier)).scalars():
-                if METRICS_KEY in (classifier.metrics or {}):
-                    classifier.metrics = {k: v for k, v in classifier.metrics.items() if k != METRICS_KEY}
+                Calibration.store(classifier, fit=None)  # none stored: the run fits the weights again
     return target
 
 
@@ -65,9 +64,9 @@ def probe(profile: str, pairs: int, overrides: list[str]) -> dict:
     """Runs the stage (this process is fresh) and returns its summary and timings."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
+    from photoshape_flow.fitting.fit import fit_pairs_of, run_fit
     from photoshape_flow.method_keys import MethodKey
-    from photoshape_flow.pipeline.fit import fit_pairs_of, run_fit
-    from photoshape_flow.pipeline.inference import resolve_classifier
+    from photoshape_flow.networks.classifiers import resolve_classifier
     from photoshape_flow.profiles import resolve_profile
 
     cfg = resolve_profile(profile, overrides).profile.fit

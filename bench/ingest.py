@@ -75,7 +75,7 @@ def main() -> None:
 
     from photoshape_flow.config import Settings
     from photoshape_flow.db import migrate
-    from photoshape_flow.pipeline.ingest import ingest_exemplars, ingest_shapes
+    from photoshape_flow.ingest.ingest import ingest_exemplars, ingest_shapes
 
     rows: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="photoshape-bench-") as tmp:

@@ -19,9 +19,11 @@ from sqlalchemy.orm import Session
 from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
-from photoshape_flow.pipeline.calibration import COLOR_SIGMA_RENDERS, material_lab
-from photoshape_flow.pipeline.substances import load_substance_network, substance_temperature
-from photoshape_flow.pipeline.training import training_data
+from photoshape_flow.networks.calibrations import material_lab
+from photoshape_flow.networks.classifiers import load_substance_network
+from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
+from photoshape_flow.recognition.substance_temperature import substance_temperature
+from photoshape_flow.recognition.training import training_data
 from photoshape_flow.store import BlobStore
 
 

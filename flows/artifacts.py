@@ -149,7 +149,7 @@ def publish_gallery_artifacts(gallery_index: str | None, method: str | None = No
     import cv2
     from prefect.artifacts import create_image_artifact, create_link_artifact
 
-    from photoshape_flow.pipeline.gallery_site import write_contact_sheet
+    from photoshape_flow.publish.gallery_site import write_contact_sheet
 
     made: dict[str, str] = {}
     if gallery_index:

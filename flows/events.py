@@ -12,7 +12,7 @@ from typing import Any
 
 from photoshape_flow.config import Settings
 from photoshape_flow.events import MATERIAL_EVENT, MATERIAL_SET_RESOURCE
-from photoshape_flow.pipeline.ingest_common import one_line
+from photoshape_flow.ingest.common import one_line
 
 logger = logging.getLogger(__name__)
 

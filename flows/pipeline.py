@@ -86,7 +86,7 @@ def photoshape_pipeline(profile: ProfileName | None = None, stages: list[StageNa
     "the summary says how many parts changed. Retraining waits for the nightly run."))
 def new_materials(profile: ProfileName | None = None, renders_per_material: int = 40,
                   overrides: list[str] | None = None) -> dict[str, Any]:
-    """Materials were added: the triggered chain of `pipeline.new_materials` (D36), fit then publish.
+    """Materials were added: the triggered chain of `stages.new_materials` (D36), fit then publish.
 
     The new materials are found by querying the database (what the newest classifier does not know),
     not from the triggering event, so one debounced run covers a whole bulk import. `fit` runs on the
@@ -97,8 +97,8 @@ def new_materials(profile: ProfileName | None = None, renders_per_material: int 
     """
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.fit_changes import fit_changes, fit_snapshot
-    from photoshape_flow.pipeline.new_materials import plan_material_rerun
+    from photoshape_flow.fitting.changes import fit_changes, fit_snapshot
+    from photoshape_flow.stages.new_materials import plan_material_rerun
     from photoshape_flow.stages.rerun import ORIGIN
 
     url = get_settings().resolved_database_url

@@ -98,7 +98,7 @@ def ingest(
     overrides: list[str] | None = None,
 ) -> dict[str, Any]:
     """Ingest the four collections; without paths, everything in <data_root>/inbox/{envmaps,materials,...}."""
-    from photoshape_flow.stages.ingest import IngestRequest
+    from photoshape_flow.ingest.ingest_stage import IngestRequest
 
     given = {"shapes": shapes, "exemplars": exemplars, "materials": materials, "envmaps": envmaps}
     roots = {k: list(v) for k, v in given.items() if v} or None

@@ -211,7 +211,7 @@ def data_root_with_inbox(data_root: Path, demo: Path) -> Path:
 def ingest_tiny_demo(demo: Path, exemplar_size: int = 128) -> None:
     """The demo's exemplars, shapes and materials under the source `photoshape demo` gives them
     (demo-tiny), so its ground truth matches; into the database the settings point at."""
-    from photoshape_flow.pipeline.ingest import ingest_exemplars, ingest_materials, ingest_shapes
+    from photoshape_flow.ingest.ingest import ingest_exemplars, ingest_materials, ingest_shapes
 
     assert ingest_exemplars([demo / "exemplars"], source="demo-tiny", size=exemplar_size).added
     assert ingest_shapes([demo / "shapes"], source="demo-tiny", isolate=False).added

@@ -1,12 +1,13 @@
 """The package's import graph, read with `ast` (nothing is imported): no circle, layers point down,
-and no function-local import of a package module outside `cli/` but for a short, reasoned allow-list.
+and no function-local import of a package module outside `cli/`.
 
 An import inside a function hides an edge from the reader and from this test's ordinary view; it is
 how circles between stages grew unnoticed (issue 43). So both kinds of edge count for the circle
-check, and function-local ones are allowed only where the import is heavy (torch, or numpy for
-`photoshape --help`) and the importer sits on a path that must stay light (`LIGHT`, see
-`tests/test_profiles.py::test_profiles_and_the_cli_load_without_torch`). `if TYPE_CHECKING:` imports
-are not executed and do not count.
+check, and function-local ones are allowed only in `cli/`, where they keep `photoshape --help` fast.
+What must load light without them does so by design: the stage registry names each stage's module by
+its dotted path and imports it on first use (`stages.registry.Stage.entry`), and the export formats'
+table (`export.formats`) stands apart from their writers (`export.writers`).
+`if TYPE_CHECKING:` imports are not executed and do not count.
 """
 
 from __future__ import annotations
@@ -34,33 +35,19 @@ LIGHT: dict[str, tuple[str, ...]] = {
     f"{PACKAGE}.classify.color_prior": ("torch",),
 }
 
-_STAGE_REGISTRY = "the stage registry (flows, `photoshape status`) loads every stage module; this one imports torch"
-
-# Function-local imports of package modules allowed outside cli/: (importer, imported) -> why.
-# Keep it short; every entry needs a reason that still holds (mitsuba is no reason: importing
-# `photoshape_flow.render` never starts it, `render.runtime.ensure_mitsuba` does on first use).
-LAZY_ALLOWED: dict[tuple[str, str], str] = {
-    (f"{PACKAGE}.stages.fit", f"{PACKAGE}.pipeline.fit"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.fit", f"{PACKAGE}.pipeline.inference"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.inference", f"{PACKAGE}.pipeline.inference"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.substances", f"{PACKAGE}.pipeline.substances"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.training", f"{PACKAGE}.pipeline.calibration"): _STAGE_REGISTRY,
-    (f"{PACKAGE}.stages.training", f"{PACKAGE}.pipeline.training"): _STAGE_REGISTRY,
-    # `photoshape --help` reads the format registry (profiles, `export --format`); the writers load
-    # numpy, PIL and the render specs only when a format is written (the module's docstring)
-    (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.assignment"): "the CLI's start reads EXPORTERS; no numpy",
-    (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.gltf"): "the CLI's start reads EXPORTERS; no writer",
-    (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.mitsuba_xml"): "the CLI's start reads EXPORTERS; no writer",
-    (f"{PACKAGE}.export.formats", f"{PACKAGE}.export.obj"): "the CLI's start reads EXPORTERS; no writer",
-    (f"{PACKAGE}.classify.color_prior", f"{PACKAGE}.classify.dataset"):
-        "the render readers live in the torch dataset module; only fitting sigma on renders needs them",
-}
 
 # The layers, top to bottom (docs/architecture.md): a module imports its own layer or lower ones. A
 # module belongs to the layer of its longest listed prefix ("" is the package's __init__).
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("cli",),
     ("stages",),  # the registry: the composition root
+    ("scoring",),
+    ("publish",),
+    ("fitting",),
+    ("recognition",),
+    ("networks",),
+    ("alignment",),
+    ("ingest",),
     ("pipeline",),
     ("profiles",),
     ("db", "store"),
@@ -237,13 +224,13 @@ def _edge_lines(importer: str, imported: str) -> str:
 def test_the_parser_sees_the_package() -> None:
     """A guard against a test that passes because it reads nothing."""
     mods = modules()
-    assert f"{PACKAGE}.pipeline.fit" in mods and f"{PACKAGE}.cli" in mods and len(mods) > 150
+    assert f"{PACKAGE}.fitting.fit" in mods and f"{PACKAGE}.cli" in mods and len(mods) > 150
     assert any(e.importer == f"{PACKAGE}.stages.registry" and not e.local for e in edges())
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == ["a", "b", "c", "a"]
-    tree = ast.parse("from . import fit\nfrom .fit_context import X\nif TYPE_CHECKING:\n    import photoshape_flow.db\n"
+    tree = ast.parse("from . import fit\nfrom .context import X\nif TYPE_CHECKING:\n    import photoshape_flow.db\n"
                      "def f():\n    from ..store import blobstore\n")
-    got = [(t, local) for _, t, local in _imports(tree, f"{PACKAGE}.pipeline.fit_refine", False)]
-    assert got == [(f"{PACKAGE}.pipeline.fit", False), (f"{PACKAGE}.pipeline.fit_context", False),
+    got = [(t, local) for _, t, local in _imports(tree, f"{PACKAGE}.fitting.refine", False)]
+    assert got == [(f"{PACKAGE}.fitting.fit", False), (f"{PACKAGE}.fitting.context", False),
                    (f"{PACKAGE}.store.blobstore", True)]
 
 
@@ -261,17 +248,11 @@ def test_no_function_local_package_import_outside_cli() -> None:
     cli = f"{PACKAGE}.cli"
     offenders = sorted(
         {(e.importer, e.imported, e.line) for e in edges()
-         if e.local and e.importer != cli and not e.importer.startswith(cli + ".")
-         and (e.importer, e.imported) not in LAZY_ALLOWED})
+         if e.local and e.importer != cli and not e.importer.startswith(cli + ".")})
     assert not offenders, (
-        f"{len(offenders)} function-local imports of package modules (move them to the top, or "
-        "add a reasoned entry to LAZY_ALLOWED):\n"
+        f"{len(offenders)} function-local imports of package modules outside cli/ (move them to the top; "
+        "a heavy module that a light one needs only sometimes is a sign the light one holds two things):\n"
         + "\n".join(f"  {_short(a)}:{line} imports {_short(b)}" for a, b, line in offenders))
-
-
-def test_the_allow_list_has_no_stale_entries() -> None:
-    local = {(e.importer, e.imported) for e in edges() if e.local}
-    assert not (stale := sorted(set(LAZY_ALLOWED) - local)), f"no longer imported lazily: {stale}"
 
 
 def _imports_at_top(path: Path, heavy: tuple[str, ...]) -> bool:
@@ -292,7 +273,7 @@ def _imports_at_top(path: Path, heavy: tuple[str, ...]) -> bool:
 
 
 def test_the_light_entry_points_load_nothing_heavy() -> None:
-    """What LAZY_ALLOWED's reasons rely on: the module-level closure of each LIGHT module."""
+    """The module-level closure of each LIGHT module reaches no module that imports one of its heavy ones."""
     graph = _graph(local=False)
     for root, heavy in LIGHT.items():
         parents: dict[str, str | None] = {root: None}

@@ -62,8 +62,8 @@ from photoshape_flow.classify.substance_train import predict_substances
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.training import load_material_classifier
-from photoshape_flow.pipeline.training_renders import RenderInputs
+from photoshape_flow.networks.classifiers import load_material_classifier
+from photoshape_flow.recognition.training_renders import RenderInputs
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCES

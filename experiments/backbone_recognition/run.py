@@ -7,7 +7,7 @@ Each arm is `name=preset[:field=value,...]` (dotted fields reach the augmentatio
 the pipeline's own `run_training` on the collection's training and bootstrap renders (a new classifier
 row each; run it on a scratch copy of the database: the newest row is what inference reads). They are
 scored on the validation renders (shapes and envmaps no arm trained on), degraded like exemplars and
-with misaligned part maps (`pipeline.bn_prior.photo_cases`), never on exemplars: material top-1 /
+with misaligned part maps (`recognition.bn_prior.photo_cases`), never on exemplars: material top-1 /
 top-5 over the enabled materials, substance top-1 of the substance head and of the material head's
 mass per substance, with 95% bootstrap intervals over renders.
 """
@@ -29,8 +29,9 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.devices import set_torch_threads
-from photoshape_flow.pipeline.bn_prior import photo_cases
-from photoshape_flow.pipeline.training import load_material_classifier, material_set, run_training
+from photoshape_flow.networks.classifiers import load_material_classifier
+from photoshape_flow.recognition.bn_prior import photo_cases
+from photoshape_flow.recognition.training import material_set, run_training
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -95,8 +96,9 @@ def substance_arm(settings: Any, store: BlobStore, spec: str, cases: list, subst
     preset name on a backbone ("backbone"), trained here on the bootstrap round.
     """
     from photoshape_flow.classify.substance_configs import get_config as substance_config
-    from photoshape_flow.pipeline.bn_prior import substance_readings
-    from photoshape_flow.pipeline.substances import load_substance_network, train_recogniser
+    from photoshape_flow.networks.classifiers import load_substance_network
+    from photoshape_flow.recognition.bn_prior import substance_readings
+    from photoshape_flow.recognition.substances import train_recogniser
 
     started = time.perf_counter()
     if spec == "unet":

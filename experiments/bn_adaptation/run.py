@@ -30,9 +30,8 @@ from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.bn_prior import PhotoCase, photo_cases
-from photoshape_flow.pipeline.substances import load_substance_network
-from photoshape_flow.pipeline.training import load_material_classifier
+from photoshape_flow.networks.classifiers import load_material_classifier, load_substance_network
+from photoshape_flow.recognition.bn_prior import PhotoCase, photo_cases
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 

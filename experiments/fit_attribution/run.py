@@ -48,13 +48,14 @@ from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_
 from photoshape_flow.fit.appearance import erode
 from photoshape_flow.fit.scene import FitScene, estimate_lighting
 from photoshape_flow.fit.select import rank_candidates
-from photoshape_flow.pipeline.evaluate import pair_truths, truth_labels
-from photoshape_flow.pipeline.fit import candidates_of, exemplar_lighting, select_materials
-from photoshape_flow.pipeline.fit_calibration import ensure_calibration
-from photoshape_flow.pipeline.fit_context import FitContext, PairData, load_pair
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
-from photoshape_flow.pipeline.inference import ALIGNMENT_METHOD, resolve_classifier
+from photoshape_flow.fitting.calibration import ensure_calibration
+from photoshape_flow.fitting.context import FitContext, PairData, load_pair
+from photoshape_flow.fitting.fit import candidates_of, exemplar_lighting, select_materials
+from photoshape_flow.networks.classifiers import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
+from photoshape_flow.recognition.inference import ALIGNMENT_METHOD
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring.truths import pair_truths, truth_labels
 from photoshape_flow.store import BlobStore
 
 CONDITIONS = ("fit", "fit-distance", "gt-light", "gt-envmap", "gt-mask", "gt-both", "gt-both-distance")

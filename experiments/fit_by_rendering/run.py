@@ -18,10 +18,10 @@ from pathlib import Path
 
 from experiments.common import results_dir
 from photoshape_flow.config import get_settings
+from photoshape_flow.fitting.fit import run_fit
 from photoshape_flow.method_keys import CLASSIFIER, FIT, method_of
-from photoshape_flow.pipeline.evaluate import run_evaluation
-from photoshape_flow.pipeline.fit import run_fit
 from photoshape_flow.profiles import resolve_profile
+from photoshape_flow.scoring.evaluate import run_evaluation
 
 VARIANTS = {
     "default": [],  # weights and temperature fitted on validation renders (D34)

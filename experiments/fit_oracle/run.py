@@ -3,7 +3,7 @@
     python -m experiments.fit_oracle.run --profile small
     python -m experiments.fit_oracle.run --profile small --conditions est,deg,mis,def --probe embedding
 
-The fit calibration (`pipeline.fit_calibration`) turns validation renders (our renderer, library
+The fit calibration (`fitting.calibration`) turns validation renders (our renderer, library
 materials, val shapes under val envmaps) into aligned "photos" and measures every candidate as the
 stage does. Here each nuisance between such a photo and the render of its true material can be
 switched off, one condition = four switches, comma-separated:
@@ -56,11 +56,11 @@ from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit import scene as sc
 from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
+from photoshape_flow.fitting import calibration as fc
+from photoshape_flow.fitting.context import FitContext, PairData
+from photoshape_flow.fitting.fit import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed
-from photoshape_flow.pipeline import fit_calibration as fc
-from photoshape_flow.pipeline.fit import candidates_of, lighting_estimate
-from photoshape_flow.pipeline.fit_context import FitContext, PairData
-from photoshape_flow.pipeline.inference import resolve_classifier
+from photoshape_flow.networks.classifiers import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
 from photoshape_flow.render.specs import linear_to_srgb

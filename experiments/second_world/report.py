@@ -35,8 +35,9 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import mean_interval
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-from photoshape_flow.pipeline.evaluate import inference_metrics, inference_observations, pair_truths
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring.evaluate import inference_metrics, inference_observations
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring.truths import pair_truths
 from photoshape_flow.store import BlobStore
 
 METRICS = ("material_top1", "material_top5", "substance_accuracy")

@@ -32,7 +32,6 @@ from sqlalchemy.orm import Session
 
 from photoshape_flow.align.partmap import resize_labels
 from photoshape_flow.classify.assignment import median_lab
-from photoshape_flow.classify.dataset import load_label_map, load_rgb
 from photoshape_flow.classify.evidence import min_region_fraction
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_recognition import substance_map
@@ -41,10 +40,12 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.demo import newest_groundtruth
 from photoshape_flow.evaluation.groundtruth import GroundTruthFile, read_groundtruth_file
-from photoshape_flow.pipeline.calibration import COLOR_SIGMA_RENDERS
-from photoshape_flow.pipeline.evaluate import majority_label, merge_labels, truth_labels
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
-from photoshape_flow.pipeline.training import load_material_classifier, training_data
+from photoshape_flow.imaging.io import load_label_map, load_rgb
+from photoshape_flow.networks.classifiers import load_material_classifier
+from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
+from photoshape_flow.recognition.training import training_data
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring.truths import majority_label, merge_labels, truth_labels
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 

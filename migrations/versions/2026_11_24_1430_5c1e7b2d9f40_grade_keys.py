@@ -32,7 +32,7 @@ depends_on: str | Sequence[str] | None = None
 
 
 def _backfill(conn: sa.Connection) -> None:
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
 
     grades = conn.execute(sa.text("SELECT id, pair_id FROM grade")).all()
     published: dict[int, str] = {}

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 SEPARATOR = ":"
 CLASSIFIER = "classifier"  # ours: `assignment.method` of the classifier's ranking (vocab.ASSIGNMENT_METHODS[0])
-FIT = "fit"  # the fit stage's rows (`pipeline.fit`)
+FIT = "fit"  # the fit stage's rows (`fitting.fit`)
 
 
 def _split(text: str) -> tuple[str, str | None]:

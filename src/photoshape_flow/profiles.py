@@ -94,10 +94,10 @@ class InferenceConfig:
 
 @dataclass(frozen=True)
 class FitConfig:
-    """Fit by rendering (`pipeline.fit`): candidates per part, render quality, lighting search, cost weights.
+    """Fit by rendering (`fitting.fit`): candidates per part, render quality, lighting search, cost weights.
 
     The cost weights and the scores' temperature are fitted per classifier on `calibration_cases`
-    validation renders made to look like aligned product photos (`pipeline.fit_calibration`,
+    validation renders made to look like aligned product photos (`fitting.calibration`,
     docs/decisions.md D34), never on exemplars or evaluation worlds; the blur is the one of
     `calibration_blurs` with the lowest held-out log-loss on those renders. The five weights and `blur` are the
     hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or no

@@ -122,7 +122,7 @@ def test_the_material_classifier_applies_its_prior_only_when_set() -> None:
 
 
 def test_the_choice_adopts_a_prior_only_beyond_noise() -> None:
-    from photoshape_flow.pipeline.bn_prior import choose
+    from photoshape_flow.recognition.bn_prior import choose
 
     rng = np.random.default_rng(9)
     groups = np.repeat(np.arange(30), 4)  # 30 renders, 4 regions each
@@ -140,7 +140,7 @@ def test_the_choice_adopts_a_prior_only_beyond_noise() -> None:
 
 def test_the_loss_the_choice_compares_is_blind_to_overconfidence() -> None:
     """A network made flatter (as adaptation can) gains raw log-loss, not tempered log-loss."""
-    from photoshape_flow.pipeline.bn_prior import tempered_log_loss
+    from photoshape_flow.recognition.bn_prior import tempered_log_loss
 
     rng = np.random.default_rng(0)
     truth = rng.integers(0, 5, 200)
@@ -163,8 +163,8 @@ def test_a_chosen_prior_enters_the_fit_calibrations_key_and_no_prior_leaves_it()
     from types import SimpleNamespace
 
     from photoshape_flow.db import models as m
-    from photoshape_flow.pipeline.fit_calibration import calibration_key
-    from photoshape_flow.pipeline.training import stored_bn_prior
+    from photoshape_flow.fitting.calibration import calibration_key
+    from photoshape_flow.networks.calibrations import Calibration
     from photoshape_flow.profiles import FitConfig
 
     def ctx(metrics: dict) -> SimpleNamespace:
@@ -174,6 +174,7 @@ def test_a_chosen_prior_enters_the_fit_calibrations_key_and_no_prior_leaves_it()
     plain = calibration_key(ctx({}), [], 0)
     unadapted = {"bn_prior_choice": {"bn_prior": None, "regions": 10}}
     adapted = {"bn_prior_choice": {"bn_prior": 4.0, "regions": 10}}
-    assert stored_bn_prior(ctx(adapted).classifier) == 4.0 and stored_bn_prior(ctx(unadapted).classifier) is None
+    assert Calibration.of(ctx(adapted).classifier).bn_prior == 4.0
+    assert Calibration.of(ctx(unadapted).classifier).bn_prior is None
     assert calibration_key(ctx(unadapted), [], 0) == plain
     assert calibration_key(ctx(adapted), [], 0) != plain

@@ -61,11 +61,12 @@ def test_the_former_callers_rank_a_region_alike(tmp_path: Path, settings_env: Pa
 
     import photoshape_flow.classify.dataset as dataset
     import photoshape_flow.db.session as db_session
-    import photoshape_flow.pipeline.calibration as calibration
-    import photoshape_flow.pipeline.fit_calibration as fit_calibration
-    import photoshape_flow.pipeline.training as training
+    import photoshape_flow.fitting.calibration as fit_calibration
+    import photoshape_flow.networks.classifiers as classifiers
+    import photoshape_flow.networks.evidence as evidence
+    import photoshape_flow.recognition.calibration as calibration
     from photoshape_flow.cli import retrieve_cmd
-    from photoshape_flow.pipeline.inference import PartSubstanceView, _PartInput, _rank_part
+    from photoshape_flow.recognition.inference import PartSubstanceView, _PartInput, _rank_part
 
     image, ids, masks = scene()
     model, config, k = FakeClassifier(), {"architecture": "fake"}, 4  # a row config without min_region_fraction
@@ -75,10 +76,9 @@ def test_the_former_callers_rank_a_region_alike(tmp_path: Path, settings_env: Pa
     def no_database(*_: Any, **__: Any) -> Any:
         yield SimpleNamespace(get=lambda *_: row, execute=lambda *_: [])
 
-    for module in (training, fit_calibration):  # `retrieve` finds them in training and calibration
+    for module in (classifiers, fit_calibration):  # `retrieve` finds it in networks.classifiers
         monkeypatch.setattr(module, "load_material_classifier", lambda *_, **__: (row, model))
-    for module in (calibration, fit_calibration):
-        monkeypatch.setattr(module, "stored_color_prior", lambda *_: (LABS, SIGMA))
+    monkeypatch.setattr(evidence, "stored_color_prior", lambda *_: (LABS, SIGMA))  # every ranker's evidence
     monkeypatch.setattr(fit_calibration, "session_scope", no_database)
     monkeypatch.setattr(db_session, "session_scope", no_database)
     monkeypatch.setattr(retrieve_cmd, "require_database", lambda: None)

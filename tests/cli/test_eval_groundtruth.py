@@ -27,8 +27,8 @@ from photoshape_flow.cli import app
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-from photoshape_flow.pipeline import evaluate as ev
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring import truths
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 
 runner = CliRunner()
@@ -78,7 +78,7 @@ def add_oracle(url: str, store: BlobStore, demo: Path) -> int:
                           azimuth=0.0, elevation=0.0, fov=50.0, camera_distance=2.0)  # rank 2: no re-render
             session.add(pair)
             session.flush()
-            labels, _, _ = ev.truth_labels(truth, session.get(m.Exemplar, exemplar_id))
+            labels, _, _ = truths.truth_labels(truth, session.get(m.Exemplar, exemplar_id))
             index = {p.name: p.index for p in shape.parts}
             part_map = np.array([0] + [index[name] for name in sorted(truth.parts)], np.uint8)[labels]
             blob = store.put_image(part_map)

@@ -74,7 +74,7 @@ def test_exemplar_match_revision_drops_the_old_reverse_index_rows(any_db_url: st
 
 def test_grade_keys_revision_backfills_from_the_published_method(any_db_url: str) -> None:
     """Grades of a published pair get its method and assignment-set key; others stay legacy (NULL)."""
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
 
     migrate.upgrade(any_db_url)
     engine = make_engine(any_db_url)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from photoshape_flow.evaluation.tables import headline_rows, stage_rows
-from photoshape_flow.pipeline.evaluate import Metric
+from photoshape_flow.scoring.evaluate import Metric
 
 
 def test_headline_puts_ours_first_then_the_baselines_with_the_gap_in_top1() -> None:

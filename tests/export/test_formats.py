@@ -1,4 +1,4 @@
-"""The export-format registry: every consumer reads it, so one new class is one new format."""
+"""The export-format table: every consumer reads it, so one line and one writer are one new format."""
 
 from __future__ import annotations
 
@@ -6,29 +6,27 @@ import zipfile
 from pathlib import Path
 
 from photoshape_flow.export.bundle import export_photoshape
-from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, SIDECAR, Exporter, ExportInput, parse_formats
+from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, SIDECAR, ExportFormat, parse_formats
 from photoshape_flow.export.gallery import DOWNLOAD_LABELS, _download
+from photoshape_flow.export.writers import WRITERS, ExportInput
 
 DOCUMENT = {"licenses": [{"role": "shape", "name": "stool", "license": "CC0-1.0", "attribution": "A. Maker"}]}
 
+# a format that exists only in this test: the part names, one a line
+PART_NAMES = ExportFormat("names", "names/parts.txt", "part names")
 
-class PartNames(Exporter):
-    """A format that exists only in this test: the part names, one a line."""
 
-    name = "names"
-    path = "names/parts.txt"
-    description = "part names"
-
-    def write(self, target: Path, item: ExportInput) -> None:
-        target.parent.mkdir(parents=True)
-        target.write_text("\n".join([*item.attribution, *(part.name for part in item.shape.parts)]) + "\n")
+def write_part_names(target: Path, item: ExportInput) -> None:
+    target.parent.mkdir(parents=True)
+    target.write_text("\n".join([*item.attribution, *(part.name for part in item.shape.parts)]) + "\n")
 
 
 def test_registry_keys_defaults_and_paths() -> None:
     assert list(EXPORTERS) == ["glb", "gltf", "xml", "obj"]
-    assert all(name == exporter.name for name, exporter in EXPORTERS.items())
+    assert all(name == fmt.name for name, fmt in EXPORTERS.items())
+    assert set(WRITERS) == set(EXPORTERS)  # a writer for every format, no writer without one
     assert DEFAULT_FORMATS == ("glb", "xml", "obj")
-    paths = [exporter.path for exporter in EXPORTERS.values()]
+    paths = [fmt.path for fmt in EXPORTERS.values()]
     assert len(set(paths)) == len(paths) and "assignment.json" not in paths
 
 
@@ -39,8 +37,9 @@ def test_gallery_labels_come_from_the_registry() -> None:
     }
 
 
-def test_a_registered_class_is_a_format(tmp_path: Path, tiny_shape, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    monkeypatch.setitem(EXPORTERS, "names", PartNames())
+def test_a_registered_format_is_written(tmp_path: Path, tiny_shape, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    monkeypatch.setitem(EXPORTERS, "names", PART_NAMES)
+    monkeypatch.setitem(WRITERS, "names", write_part_names)
     assert parse_formats("Names, glb") == ("names", "glb")
     written = export_photoshape(tmp_path / "7", tiny_shape, None, None, DOCUMENT, formats=["names"])
     assert written == {"names": tmp_path / "7" / "names" / "parts.txt", SIDECAR: tmp_path / "7" / "assignment.json"}

@@ -61,7 +61,7 @@ def test_few_cases_stay_near_the_centre_many_cases_leave_it() -> None:
 def test_the_calibration_keeps_the_model_with_the_lowest_held_out_loss() -> None:
     """Cases drawn from the hand-set weights themselves: with few of them the held-out figures keep the
     hand-set weights (fitting six numbers only adds noise); with many drawn from other weights, the fit (D48)."""
-    from photoshape_flow.pipeline.fit_calibration import MODELS, choices, held_out, refit
+    from photoshape_flow.fitting.calibration import MODELS, choices, held_out, refit
     from photoshape_flow.profiles import FitConfig
 
     cfg = FitConfig()

@@ -26,7 +26,7 @@ def test_batched_evaluation_equals_one_pass(db_url: str, store: BlobStore, tmp_p
     from photoshape_flow.flows.evaluate import evaluate
     from prefect.testing.utilities import prefect_test_harness
 
-    from photoshape_flow.pipeline.evaluate import evaluation_batches, run_evaluation
+    from photoshape_flow.scoring.evaluate import evaluation_batches, run_evaluation
 
     made = build_scene(db_url, store, tmp_path / "demo", {"photo": TRUTH, "photo2": ALL_SEAT},
                        {"photo": PART_MAP, "photo2": TOP_HALF})

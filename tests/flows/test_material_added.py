@@ -161,7 +161,8 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     assert runs[0].state_name == "Completed", _serve_log(tmp_path / "serve.log")
     # the UI shows the work: the pipeline's own log lines, the contact sheet and a link to the gallery
     logs, artifacts = _logs_and_artifacts(env, since)
-    assert any(log.name.startswith("photoshape_flow.pipeline") for log in logs), sorted({log.name for log in logs})
+    stage_steps = ("photoshape_flow.fitting", "photoshape_flow.publish")  # the stage packages the run went through
+    assert any(log.name.startswith(stage_steps) for log in logs), sorted({log.name for log in logs})
     by_key = {a.key: a for a in artifacts if a.key}
     assert by_key["photoshape-contact-sheet"].type == "image"
     assert str(by_key["photoshape-contact-sheet"].data).startswith("data:image/jpeg;base64,")
@@ -174,7 +175,7 @@ def test_an_ingested_material_ends_in_the_gallery(prefect_server: dict[str, str]
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import get_engine, session_scope
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
 
     get_settings.cache_clear()
     get_engine.cache_clear()

@@ -178,7 +178,7 @@ def _material_blobs(row: m.Material) -> list[str | None]:
 
 @pytest.mark.parametrize(("reader", "kind"), cases("json_sidecars", "toml_sidecars"))
 def test_material_sidecars(harness: Harness, reader: str, kind: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    from photoshape_flow.pipeline.ingest import ingest_materials
+    from photoshape_flow.ingest.ingest import ingest_materials
 
     monkeypatch.setattr(BlobStore, "exists", _exists_or_analytic(BlobStore.exists))
 
@@ -199,7 +199,7 @@ def _exists_or_analytic(exists: Callable[[BlobStore, str], bool]) -> Callable[[B
 
 @pytest.mark.parametrize(("reader", "kind"), cases("objs", "gltfs", "sh3fs"))
 def test_shapes(harness: Harness, reader: str, kind: str) -> None:
-    from photoshape_flow.pipeline.ingest import ingest_shapes
+    from photoshape_flow.ingest.ingest import ingest_shapes
 
     def ingest(folder: Path, n: int) -> None:
         summary = ingest_shapes([folder], source=f"fuzz{n}", isolate=False)
@@ -212,7 +212,7 @@ def test_shapes(harness: Harness, reader: str, kind: str) -> None:
 
 @pytest.mark.parametrize(("reader", "kind"), cases("images"))
 def test_photos(harness: Harness, reader: str, kind: str) -> None:
-    from photoshape_flow.pipeline.ingest import ingest_exemplars
+    from photoshape_flow.ingest.ingest import ingest_exemplars
 
     def ingest(folder: Path, n: int) -> None:
         summary = ingest_exemplars([folder], source=f"fuzz{n}", size=64)
@@ -225,7 +225,7 @@ def test_photos(harness: Harness, reader: str, kind: str) -> None:
 
 @pytest.mark.parametrize(("reader", "kind"), cases("envmaps"))
 def test_envmaps(harness: Harness, reader: str, kind: str) -> None:
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
 
     def ingest(folder: Path, n: int) -> None:
         for path in list(folder.iterdir()):

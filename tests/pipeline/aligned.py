@@ -64,7 +64,7 @@ def make_aligned_pairs(url: str, store: BlobStore, n_pairs: int = 1) -> dict[str
 def plant_true_pair(session, store: BlobStore, shape: m.Shape, exemplar_id: int, truth) -> m.Pair:  # type: ignore[no-untyped-def]
     """A pair of `shape` and an exemplar at the ground truth's camera, with the true part map as its
     CRF alignment: what perfect coarse and fine alignment would have written."""
-    from photoshape_flow.pipeline.evaluate import truth_labels
+    from photoshape_flow.scoring.truths import truth_labels
 
     camera = truth.camera
     pair = m.Pair(shape_id=shape.id, exemplar_id=exemplar_id, rank=1, exemplar_rank=1, distance=0.0,

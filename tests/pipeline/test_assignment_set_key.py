@@ -7,7 +7,7 @@ from tests.db.seed import seed
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+from photoshape_flow.publish.photoshapes import assignment_set_keys
 
 
 def test_key_follows_the_rank1_rows(db_url: str) -> None:

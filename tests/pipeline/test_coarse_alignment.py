@@ -16,17 +16,17 @@ import sqlalchemy as sa
 from photoshape_flow.align.descriptors import HogParams
 from photoshape_flow.align.retrieval import ArrayDatabase, search
 from photoshape_flow.align.viewpoints import ViewpointParams, viewpoints
-from photoshape_flow.db import models as m
-from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.coarse.pairs import DROPPED_REASON
-from photoshape_flow.pipeline.coarse.reverse_index import match_scope
-from photoshape_flow.pipeline.coarse.viewpoint_sets import ensure_viewpoint_set
-from photoshape_flow.pipeline.coarse_alignment import (
+from photoshape_flow.alignment.coarse.pairs import DROPPED_REASON
+from photoshape_flow.alignment.coarse.reverse_index import match_scope
+from photoshape_flow.alignment.coarse.viewpoint_sets import ensure_viewpoint_set
+from photoshape_flow.alignment.coarse_alignment import (
     CoarseConfig,
     evaluate_coarse_alignment,
     load_reverse_index,
     run_coarse_alignment,
 )
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
 from photoshape_flow.render.testing import box_part, normalise_to_unit_cube
 
 VP = ViewpointParams(num_rings=3, equator_azimuths=12)

@@ -28,10 +28,10 @@ from tests.pipeline.aligned import plant_true_pair
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import TruthEntry, read_groundtruth_file
-from photoshape_flow.pipeline import evaluate as ev
-from photoshape_flow.pipeline import rerender_eval
-from photoshape_flow.pipeline.evaluate import Metric
-from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
+from photoshape_flow.scoring import evaluate as ev
+from photoshape_flow.scoring import rerender_eval, truths
+from photoshape_flow.scoring.evaluate import Metric
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 
 # ground-truth parts of the photos: character -> (part name, material, substance)
@@ -234,20 +234,20 @@ def scene(db_url: str, store: BlobStore, tmp_path: Path) -> Scene:
 def test_truth_labels_apply_the_crop_and_the_name_table(tmp_path: Path) -> None:
     """The demo's mask values (7, 5, 9, 3) and its native frame must not leak into the labels."""
     truth = entry_of(write_groundtruth(tmp_path, {"photo": TRUTH}), "photo")
-    labels, mats, subs = ev.truth_labels(truth, m.Exemplar(size=8, meta={"crop": dict(CROP)}))
+    labels, mats, subs = truths.truth_labels(truth, m.Exemplar(size=8, meta={"crop": dict(CROP)}))
     np.testing.assert_array_equal(labels, truth_grid(TRUTH))
     # sorted names: back, leg_l, leg_r, seat
     assert mats == ["blue_leather", "walnut", "walnut", "red_leather"]
     assert subs == ["leather", "wood", "wood", "leather"]
     # a stored exemplar of 16 px: every label doubled (nearest neighbour never invents a label)
-    big, _, _ = ev.truth_labels(truth, m.Exemplar(size=16, meta={"crop": dict(CROP)}))
+    big, _, _ = truths.truth_labels(truth, m.Exemplar(size=16, meta={"crop": dict(CROP)}))
     np.testing.assert_array_equal(big, np.kron(truth_grid(TRUTH), np.ones((2, 2), np.int32)))
 
 
 def test_truth_labels_without_a_crop_use_the_whole_native_frame(tmp_path: Path) -> None:
     """No crop recorded: the square of the native frame's longer side, padded with background."""
     truth = entry_of(write_groundtruth(tmp_path, {"photo": TRUTH}), "photo")
-    labels, _, _ = ev.truth_labels(truth, m.Exemplar(size=12, meta={}))
+    labels, _, _ = truths.truth_labels(truth, m.Exemplar(size=12, meta={}))
     assert labels.shape == (12, 12)
     assert (labels[10:] == 0).all()  # rows 10, 11 lie below the 10-row native mask
     seat = sorted(n for n, _, _ in GT_PARTS.values()).index("seat") + 1
@@ -267,13 +267,13 @@ def test_majority(values: list[int], expected: int | None) -> None:
     """The rule that decides which ground-truth label a part is scored against."""
     labels = np.array(values + [5], np.int64)  # one pixel outside the mask, never counted
     mask = np.array([True] * len(values) + [False])
-    assert ev.majority_label(labels, mask) == expected
+    assert truths.majority_label(labels, mask) == expected
 
 
 def test_merge_labels_joins_parts_of_one_material() -> None:
     """Two legs of one walnut become one label, so together they can outvote a larger seat."""
     labels = np.array([[0, 1, 2, 3, 4]])
-    merged, names = ev.merge_labels(labels, ["blue_leather", "walnut", "walnut", "red_leather"])
+    merged, names = truths.merge_labels(labels, ["blue_leather", "walnut", "walnut", "red_leather"])
     assert names == ["blue_leather", "red_leather", "walnut"]
     np.testing.assert_array_equal(merged, [[0, 1, 3, 3, 2]])
 
@@ -730,8 +730,8 @@ def test_run_evaluation_passes_shape_recall_and_part_label_accuracy_through(
     seat and back can be right): CRF map right on 8 seat + 8 back pixels -> 16/43; the flow map only
     on the seat row -> 8/43; an empty coarse map -> 0.
     """
-    from photoshape_flow.pipeline.coarse.viewpoint_sets import ensure_viewpoint_set
-    from photoshape_flow.pipeline.coarse_alignment import CoarseConfig
+    from photoshape_flow.alignment.coarse.viewpoint_sets import ensure_viewpoint_set
+    from photoshape_flow.alignment.coarse_alignment import CoarseConfig
 
     photos = {"photo": TRUTH, "photo2": ALL_SEAT, "photo3": ALL_SEAT}
     made = build_scene(db_url, store, tmp_path / "demo", photos, {"photo": PART_MAP},
@@ -787,7 +787,7 @@ def test_an_oracle_scores_one_on_the_tiny_demo(tiny_demo: Path, db_url: str, sto
         materials = dict(session.execute(sa.select(m.Material.name, m.Material.id)).all())
         for exemplar_id, truth in matched.truths.items():
             exemplar = session.get(m.Exemplar, exemplar_id)
-            labels, mats, subs = ev.truth_labels(truth, exemplar)
+            labels, mats, subs = truths.truth_labels(truth, exemplar)
             _, fg = exemplar_at(store.load_image(exemplar.image_blob), store.load_image(exemplar.mask_blob),
                                 exemplar.size)
             truth_fg = labels > 0
@@ -833,7 +833,7 @@ def test_rerender_error_with_mitsuba_prefers_the_true_materials(tiny_demo: Path,
     than with a material of another substance on every part (measured RMSE 0.11 against 0.20; SSIM
     0.81 against 0.67); the photo's envmap and degradations are not the studio's, so never zero."""
     pytest.importorskip("mitsuba")
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
 
     ingest_tiny_demo(tiny_demo, 64)
     ingest_envmaps([sorted((tiny_demo / "envmaps").glob("studio*"))[0]], isolate=False)

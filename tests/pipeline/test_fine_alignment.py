@@ -15,15 +15,15 @@ import sqlalchemy as sa
 
 from photoshape_flow.align.fine import FineParams
 from photoshape_flow.align.partmap import crop_square, square_box
-from photoshape_flow.config import get_settings
-from photoshape_flow.db import models as m
-from photoshape_flow.db.session import session_scope
-from photoshape_flow.geometry.mesh import ShapeMesh
-from photoshape_flow.pipeline.fine_alignment import (
+from photoshape_flow.alignment.fine_alignment import (
     evaluate_fine_alignment,
     run_fine_alignment,
     truth_in_stored_frame,
 )
+from photoshape_flow.config import get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.testing import box_part, normalise_to_unit_cube
 

@@ -31,8 +31,8 @@ def _plant_pairs(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[t
     from tests.pipeline.aligned import plant_ranking, plant_true_pair
 
     from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-    from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
+    from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 
     ingest_tiny_demo(tiny_demo, exemplar_size=64)  # under the demo's source, as its ground truth names them
     ingest_envmaps(sorted((tiny_demo / "envmaps").glob("studio*")), isolate=False)
@@ -88,8 +88,8 @@ def _fit_rows(url: str) -> list[tuple]:
 
 def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo: Path, db_url: str,
                                                                        store: BlobStore) -> None:
-    from photoshape_flow.pipeline.photoshapes import candidate_method_keys
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.publish.photoshapes import candidate_method_keys
     from photoshape_flow.stages import StageContext
     from photoshape_flow.stages.run import run_stage
 

@@ -51,9 +51,10 @@ def _fit_rows(url: str) -> dict[tuple[int, int], list[m.Assignment]]:
 def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str, store: BlobStore) -> None:
     from tests.pipeline.test_fit import _plant_pairs
 
-    from photoshape_flow.pipeline.fit_calibration import METRICS_KEY, MODELS
-    from photoshape_flow.pipeline.training_renders import run_training_renders
+    from photoshape_flow.fitting.calibration import MODELS
+    from photoshape_flow.networks.calibrations import Calibration
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.recognition.training_renders import run_training_renders
     from photoshape_flow.stages import StageContext
     from photoshape_flow.stages.run import run_stage
 
@@ -73,7 +74,8 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
     assert bar[0][1] == 0 and bar[-1][1] == bar[-1][2] >= 2  # announced, then counted to its end
     report = fitted.details[next(iter(fitted.details))]["weights"]
     with session_scope(db_url) as session:
-        stored = session.execute(sa.select(m.Classifier)).scalar_one().metrics[METRICS_KEY]
+        stored = Calibration.of(session.execute(sa.select(m.Classifier)).scalar_one()).fit
+    assert stored is not None
     record = stored["record"]
     assert record is not None and record["renders"] >= 1 and record["cases"] >= 1, stored
     with session_scope(db_url) as session:  # photos degraded at the stored exemplars' median side (D45)

@@ -10,7 +10,7 @@ from tests.pipeline.aligned import make_aligned_pairs
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.fit_refine import is_refined
+from photoshape_flow.fitting.refine import is_refined
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.store import BlobStore
 

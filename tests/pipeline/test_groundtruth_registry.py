@@ -11,7 +11,7 @@ import sqlalchemy as sa
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import GroundTruthFile
-from photoshape_flow.pipeline.groundtruth_registry import register_groundtruth, resolve_groundtruth
+from photoshape_flow.scoring.groundtruth_registry import register_groundtruth, resolve_groundtruth
 
 
 def gt_file(path: Path, sha: str) -> GroundTruthFile:

@@ -11,7 +11,7 @@ from photoshape_flow.classify.assignment import color_match, median_lab, random_
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.inference import run_all_methods, run_inference
+from photoshape_flow.recognition.inference import run_all_methods, run_inference
 
 
 @pytest.fixture

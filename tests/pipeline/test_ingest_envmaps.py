@@ -11,8 +11,8 @@ from tests.imaging.test_hdr import sky, write_exr, write_hdr
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.ingest import ingest_envmaps
-from photoshape_flow.pipeline.ingest_envmaps import envmap_split
+from photoshape_flow.ingest.envmaps import envmap_split
+from photoshape_flow.ingest.ingest import ingest_envmaps
 
 
 def _rows(url: str) -> dict[str, m.Envmap]:

@@ -15,7 +15,7 @@ from tests.imaging.test_io import png_declaring
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.imaging.dedupe import DESCRIPTOR
-from photoshape_flow.pipeline.ingest import ingest_exemplars
+from photoshape_flow.ingest.ingest import ingest_exemplars
 
 
 def _save(path: Path, array: np.ndarray, fmt: str = "JPEG", scale: float = 1.0) -> Path:

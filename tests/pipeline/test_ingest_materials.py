@@ -14,7 +14,7 @@ from tests.geometry.makers import write_png
 
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.ingest import MATERIAL_EVENT, ingest_materials, render_material_previews
+from photoshape_flow.ingest.ingest import MATERIAL_EVENT, ingest_materials, render_material_previews
 
 
 def make_folders(root: Path) -> Path:
@@ -160,7 +160,7 @@ def test_real_material_folders(db_url: str, shared_data: Path) -> None:
 def test_previews_are_rendered_when_the_renderer_is_available(db_url: str, store, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from tests.imaging.test_hdr import sky, write_hdr
 
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
 
     ingest_envmaps([write_hdr(tmp_path / "sky.hdr", sky())], isolate=False)
     summary = ingest_materials([make_folders(tmp_path / "mats") / "wood_oak"], previews=False)
@@ -175,7 +175,7 @@ def test_previews_are_rendered_when_the_renderer_is_available(db_url: str, store
 def test_materials_ingested_before_any_envmap_get_previews_later(db_url: str, tmp_path: Path) -> None:
     from tests.imaging.test_hdr import sky, write_hdr
 
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
 
     folders = make_folders(tmp_path / "mats")
     ingest_materials([folders / "wood_oak"], previews=True)  # no envmap yet: skipped

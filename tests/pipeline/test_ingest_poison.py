@@ -24,7 +24,7 @@ from typer.testing import CliRunner
 from photoshape_flow.cli import app
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.ingest_common import IngestSummary, guard_item, rejection_reason
+from photoshape_flow.ingest.common import IngestSummary, guard_item, rejection_reason
 
 runner = CliRunner()
 
@@ -74,7 +74,7 @@ def test_rejection_reason_is_one_line() -> None:
 def test_an_unforeseen_reader_error_costs_one_item(db_url: str, tmp_path: Path,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """Whatever a reader raises that nobody foresaw, the next folder is still ingested."""
-    from photoshape_flow.pipeline import ingest_materials
+    from photoshape_flow.ingest import materials as ingest_materials
 
     real = ingest_materials.scan_material
 
@@ -120,7 +120,7 @@ def test_the_80000x2_strip_is_refused_fast_in_little_memory(db_url: str, tmp_pat
     script = textwrap.dedent(f"""
         import json, re, time
         from pathlib import Path
-        from photoshape_flow.pipeline.ingest import ingest_exemplars
+        from photoshape_flow.ingest.ingest import ingest_exemplars
         start = time.perf_counter()
         summary = ingest_exemplars([{str(strip)!r}])
         seconds = time.perf_counter() - start
@@ -155,7 +155,7 @@ def test_a_strip_inside_the_aspect_limit_is_cropped_without_its_square() -> None
 def test_a_photo_rewritten_while_being_read_is_refused(db_url: str, tmp_path: Path,
                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     """A writer replaces the photo between its hashing and its decoding: refused, not stored under a wrong hash."""
-    from photoshape_flow.pipeline import ingest_exemplars
+    from photoshape_flow.ingest import exemplars as ingest_exemplars
 
     path = write_png(tmp_path / "in" / "a.png", photo(width=96, height=64, box=(30, 10, 60, 50)))
     real = ingest_exemplars.read_image
@@ -174,7 +174,7 @@ def test_a_photo_rewritten_while_being_read_is_refused(db_url: str, tmp_path: Pa
 
 def test_a_material_map_rewritten_while_being_read_is_refused(db_url: str, tmp_path: Path,
                                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    from photoshape_flow.pipeline import ingest_materials
+    from photoshape_flow.ingest import materials as ingest_materials
 
     folder = _material(tmp_path / "wood_a")
     real = ingest_materials.load_maps

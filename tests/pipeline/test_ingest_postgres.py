@@ -29,7 +29,7 @@ def pg_settings(pg_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
 
 @pytest.mark.postgres
 def test_ingest_on_postgres(pg_settings: str, tmp_path: Path) -> None:
-    from photoshape_flow.pipeline.ingest import ingest_exemplars, ingest_shapes
+    from photoshape_flow.ingest.ingest import ingest_exemplars, ingest_shapes
 
     write_chair_obj(tmp_path / "in")
     assert len(ingest_shapes([tmp_path / "in"], isolate=False).added) == 1

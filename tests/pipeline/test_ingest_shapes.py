@@ -13,7 +13,7 @@ from tests.geometry.makers import chair_members, write_chair_obj, write_glb, wri
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.geometry.mesh import ShapeMesh
-from photoshape_flow.pipeline.ingest import IngestLimits, ingest_shapes, split_for
+from photoshape_flow.ingest.ingest import IngestLimits, ingest_shapes, split_for
 
 SH3D_CHAIR = {"id": "T#chair", "name": "Chair", "category": "Living room", "tags": "", "creator": "X",
               "model": "/t/chair/chair.obj"}
@@ -185,7 +185,7 @@ def test_isolated_importer_crash_is_recorded_as_failed(db_url: str, tmp_path: Pa
                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     from tests.geometry.makers import crash_process
 
-    import photoshape_flow.pipeline.ingest_shapes as module
+    import photoshape_flow.ingest.shapes as module
 
     write_chair_obj(tmp_path / "in")
     monkeypatch.setattr(module, "prepare_shape", crash_process)
@@ -263,7 +263,7 @@ def test_a_shape_the_database_refuses_fails_alone(db_url: str, tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """A row the database refuses (a NaN area became NULL in a NOT NULL column) fails that shape with one
     line; the shapes after it are ingested and nothing of it is half-written."""
-    import photoshape_flow.pipeline.ingest_shapes as ingest_module
+    import photoshape_flow.ingest.shapes as ingest_module
 
     real = ingest_module._part_rows
     calls: list[int] = []

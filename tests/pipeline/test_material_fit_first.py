@@ -38,8 +38,8 @@ def _plant(tiny_demo: Path, db_url: str, store: BlobStore) -> tuple[dict[tuple[i
     from tests.pipeline.aligned import plant_ranking, plant_true_pair
 
     from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-    from photoshape_flow.pipeline.groundtruth_match import match_groundtruth
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
+    from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 
     gt = read_groundtruth_file(tiny_demo / "groundtruth.json")
     held_out, _ = Counter(p.material for e in gt.entries if e.in_collection for p in e.parts.values()).most_common(1)[0]
@@ -84,11 +84,11 @@ def test_a_new_material_wins_parts_through_fit_without_a_retrain(tiny_demo: Path
     from typer.testing import CliRunner
 
     from photoshape_flow.cli import app
-    from photoshape_flow.pipeline.ingest import ingest_materials
-    from photoshape_flow.pipeline.new_materials import plan_material_rerun
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+    from photoshape_flow.ingest.ingest import ingest_materials
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
     from photoshape_flow.stages import REGISTRY, StageContext, run_all
+    from photoshape_flow.stages.new_materials import plan_material_rerun
 
     truth_of, held_out = _plant(tiny_demo, db_url, store)
     # the collection's last run: fit, at the tiny profile (the re-run inherits it, publish.method=fit included)

@@ -7,9 +7,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from photoshape_flow.pipeline.fit_changes import FitChanges, PartFit, fit_changes
-from photoshape_flow.pipeline.new_materials import rerun_stages
+from photoshape_flow.fitting.changes import FitChanges, PartFit, fit_changes
 from photoshape_flow.stages import REGISTRY, WorkUnit
+from photoshape_flow.stages.new_materials import rerun_stages
 
 
 def test_a_trigger_fits_first_and_leaves_retraining_to_the_nightly_run() -> None:
@@ -75,10 +75,10 @@ def test_publish_up_to_date_check_is_keyed_by_the_chosen_methods_assignment_set(
     from tests.db.seed import seed
 
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
+    from photoshape_flow.publish.publish_stage import versions
     from photoshape_flow.stages import StageContext
-    from photoshape_flow.stages.publish import versions
 
     with session_scope(db_url) as session:
         ids = seed(session)
@@ -98,8 +98,8 @@ def test_the_gallery_lists_the_candidates_of_the_chosen_method(db_url: str, sett
 
     from photoshape_flow.db.session import session_scope
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.publish.publish_stage import finish
     from photoshape_flow.stages import StageContext
-    from photoshape_flow.stages.publish import finish
 
     with session_scope(db_url) as session:
         ids = seed(session)

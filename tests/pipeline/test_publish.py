@@ -92,8 +92,8 @@ def test_publish_renders_exports_and_resumes(db_url, store, tmp_path):
     from photoshape_flow.config import get_settings
     from photoshape_flow.export.node_tools import ProgramMissing
     from photoshape_flow.export.validate import errors, validate_gltf
-    from photoshape_flow.pipeline.downloads import export_manifest
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.downloads import export_manifest
+    from photoshape_flow.publish.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
     mk = f"{METHOD}:{ids['classifier']}"
@@ -139,7 +139,7 @@ def test_grade_rows_labels_and_sql(db_url, store, tmp_path):
     from typer.testing import CliRunner
 
     from photoshape_flow.cli import app
-    from photoshape_flow.pipeline.grading import record_grade
+    from photoshape_flow.publish.grading import record_grade
 
     ids = seed(db_url, store, tmp_path)
     runner = CliRunner()
@@ -170,8 +170,8 @@ def test_gallery_of_published_candidates(db_url, store, tmp_path):
     from photoshape_flow.cli import app
     from photoshape_flow.export.browser import check_pages, problems
     from photoshape_flow.export.node_tools import ProgramMissing
-    from photoshape_flow.pipeline.grading import record_grade
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.grading import record_grade
+    from photoshape_flow.publish.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
     run_publish(views=1, size=16, spp=2, formats=("glb", "obj"))
@@ -278,8 +278,8 @@ def test_commands_default_to_the_collections_publish_method(db_url, store, tmp_p
 def test_published_xml_renders_the_gallery_image(db_url, store, tmp_path):
     """The exported Mitsuba XML, reloaded, renders the published exemplar-view image: same framing
     (silhouette IoU), same materials, light and noise (mean absolute error at equal spp and seed)."""
-    from photoshape_flow.pipeline.downloads import export_dir
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.downloads import export_dir
+    from photoshape_flow.publish.publish import run_publish
     from photoshape_flow.render.runtime import ensure_mitsuba
     from photoshape_flow.render.tonemap import composite
 
@@ -329,7 +329,7 @@ def test_grade_belongs_to_the_photoshape_it_was_given_to(db_url, store, tmp_path
     from typer.testing import CliRunner
 
     from photoshape_flow.cli import app
-    from photoshape_flow.pipeline.photoshapes import assignment_set_keys
+    from photoshape_flow.publish.photoshapes import assignment_set_keys
 
     ids = seed(db_url, store, tmp_path)
     good, old_key = ids["good"], f"{METHOD}:{ids['classifier']}"
@@ -400,10 +400,10 @@ def get_settings_data_root() -> Path:
 def test_publish_renders_and_exports_the_refined_look_with_a_before_after(db_url, store, tmp_path):
     """A refined rank-1 row: publish renders the refined materials, the unrefined ones once more for the
     gallery's before/after, and the exports carry the refinement (the XML renders the published image)."""
-    from photoshape_flow.pipeline.downloads import export_dir
-    from photoshape_flow.pipeline.gallery_site import write_gallery_site
-    from photoshape_flow.pipeline.photoshapes import UNREFINED_VIEW, assignment_set_keys
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.downloads import export_dir
+    from photoshape_flow.publish.gallery_site import write_gallery_site
+    from photoshape_flow.publish.photoshapes import UNREFINED_VIEW, assignment_set_keys
+    from photoshape_flow.publish.publish import run_publish
     from photoshape_flow.render.runtime import ensure_mitsuba
     from photoshape_flow.render.tonemap import composite
 
@@ -445,9 +445,9 @@ def test_documented_published_query_is_the_gallerys_index_with_its_grades_and_sc
     from tests.db.test_data_model_doc import published_query
 
     from photoshape_flow.config import get_settings
-    from photoshape_flow.pipeline.gallery_site import gallery_data
-    from photoshape_flow.pipeline.grading import record_grade
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.gallery_site import gallery_data
+    from photoshape_flow.publish.grading import record_grade
+    from photoshape_flow.publish.publish import run_publish
     from photoshape_flow.store import BlobStore
 
     ids = seed(db_url, store, tmp_path)

@@ -8,7 +8,7 @@ import pytest
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import ItemRef, PartTruth, TruthEntry
-from photoshape_flow.pipeline.relighting_eval import held_out_envmap, silhouette_rmse, true_materials
+from photoshape_flow.scoring.relighting_eval import held_out_envmap, silhouette_rmse, true_materials
 
 
 def test_silhouette_rmse_counts_only_the_silhouette() -> None:

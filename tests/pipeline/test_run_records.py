@@ -22,7 +22,7 @@ def _killed_run(data_root: Path) -> int:
     script = textwrap.dedent("""
         import os, signal
         from photoshape_flow.profiles import resolve_profile
-        from photoshape_flow.stages.context import StageContext
+        from photoshape_flow.pipeline.context import StageContext
         from photoshape_flow.stages.run import start_run
         run_id = start_run(StageContext.create(), resolve_profile("tiny"), ["ingest"], "cli")
         print(run_id, flush=True)
@@ -47,9 +47,9 @@ def test_status_shows_a_killed_run_as_died(db_url: str, settings_env: Path) -> N
 
 
 def test_a_live_run_stays_running_and_a_new_run_sweeps_dead_ones(db_url: str, settings_env: Path) -> None:
+    from photoshape_flow.pipeline.context import StageContext
     from photoshape_flow.pipeline.runs import mark_dead_runs
     from photoshape_flow.profiles import resolve_profile
-    from photoshape_flow.stages.context import StageContext
     from photoshape_flow.stages.run import finish_run, start_run
 
     dead = _killed_run(settings_env)

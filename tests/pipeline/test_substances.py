@@ -10,7 +10,7 @@ from tests.synth.collection import seed_collection
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.pipeline.substances import run_substances
+from photoshape_flow.recognition.substances import run_substances
 from photoshape_flow.vocab import SUBSTANCE_LABELS, SUBSTANCES
 
 EXEMPLAR = 48
@@ -64,7 +64,7 @@ def test_substances_stage_end_to_end_and_idempotent(
 
     # a run interrupted (Ctrl-C) after the first epoch leaves a resumable checkpoint behind, its row
     # failed rather than "training" (nobody trains it any more)
-    from photoshape_flow.pipeline import substances as substance_train  # where train_or_resume finds it
+    from photoshape_flow.recognition import substances as substance_train  # where train_or_resume finds it
 
     original = substance_train.train_substance_net
 
@@ -131,7 +131,7 @@ def test_substances_stage_end_to_end_and_idempotent(
     assert set(choice["log_loss"]) == {"None", "16.0", "4.0", "1.0"}
     assert classifier_after.metrics["bn_prior_choice"] == choice
     from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
-    from photoshape_flow.pipeline.substances import assign_part_substances
+    from photoshape_flow.recognition.substances import assign_part_substances
 
     network = load_model(checkpoint_from_bytes(store.read_bytes(classifier.checkpoint_blob)))
     other = 1.0 if choice["bn_prior"] is None else None
@@ -143,7 +143,7 @@ def test_substances_stage_end_to_end_and_idempotent(
     assert assign_part_substances(get_settings(), classifier.id, network, 32, bn_prior=other)["skipped"] == 3
 
     # the part-level temperature: fit on held-out renders, cached, refit when they change
-    from photoshape_flow.pipeline.substances import substance_temperature
+    from photoshape_flow.recognition.substance_temperature import substance_temperature
 
     settings = get_settings()
     first = substance_temperature(settings, classifier.id)

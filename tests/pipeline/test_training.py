@@ -15,8 +15,9 @@ from typer.testing import CliRunner
 from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
-from photoshape_flow.pipeline import training as train_module  # run_training calls train_classifier from here
-from photoshape_flow.pipeline.training import load_material_classifier, run_training
+from photoshape_flow.networks.classifiers import load_material_classifier
+from photoshape_flow.recognition import training as train_module  # run_training calls train_classifier from here
+from photoshape_flow.recognition.training import run_training
 
 TOY = {"oak": ("wood", (150, 90, 40)), "denim": ("fabric", (40, 60, 170)), "steel": ("metal", (120, 120, 130))}
 
@@ -160,7 +161,7 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
     # with the materials' colours known, the training stage's calibration fits sigma on the val renders;
     # retrieve reads it, and the colour likelihood puts the material drawn in the region's colour first
     from photoshape_flow.config import get_settings
-    from photoshape_flow.pipeline.calibration import calibrate
+    from photoshape_flow.recognition.calibration import calibrate
 
     with session_scope(db_url) as session:
         for mid, (_, colour) in materials.items():
@@ -202,7 +203,7 @@ def test_retrieve_cli_ranks_materials_for_a_region(db_url: str, store, tmp_path:
 
 
 def test_validation_held_out_by_key_when_no_rendering_is_val(db_url: str, store) -> None:
-    from photoshape_flow.pipeline.training import training_data
+    from photoshape_flow.recognition.training import training_data
 
     materials = _add_materials(db_url, TOY)
     _add_renders(db_url, store, materials, 40, "a", val_every=10**6)  # only index 0 is "val"

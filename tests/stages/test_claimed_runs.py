@@ -4,7 +4,6 @@ inputs changed (publish: a new classifier's assignment) is claimed again."""
 
 from __future__ import annotations
 
-import dataclasses
 import datetime as dt
 import time
 
@@ -37,7 +36,7 @@ def _fake_stage(monkeypatch: pytest.MonkeyPatch, name: str, seen: list[tuple[int
         seen.append(work.ids)
         return StageReport(name, done=len(work.ids))
 
-    monkeypatch.setitem(STAGES, name, dataclasses.replace(STAGES[name], run=fake_run))
+    monkeypatch.setattr(STAGES[name].entry, "run", fake_run)
 
 
 def test_items_a_live_worker_holds_are_reported_blocked(db_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -142,7 +141,7 @@ def test_a_finishing_step_runs_once_at_a_time(db_url: str, monkeypatch: pytest.M
         calls.append("gallery")
         return StageReport("publish")
 
-    monkeypatch.setitem(STAGES, "publish", dataclasses.replace(STAGES["publish"], finish=fake_finish))
+    monkeypatch.setattr(STAGES["publish"].entry, "finish", fake_finish)
     ctx = StageContext.create()
     with session_scope(db_url) as session:
         claims.claim(session, "publish:finish", ["stage"], worker="other-worker", lease_seconds=900)

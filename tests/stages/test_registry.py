@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ast
-import dataclasses
 import datetime as dt
 from pathlib import Path
 
@@ -23,7 +22,8 @@ def test_registry_lists_every_stage_once_in_pipeline_order() -> None:
     assert STAGE_NAMES == PIPELINE_ORDER
     for stage in REGISTRY:
         assert callable(stage.run) and callable(stage.progress) and stage.writes and stage.description
-        assert stage.fans_out == (stage.plan is not None)
+        assert stage.fans_out == hasattr(stage.entry, "plan") == (stage.plan is not None)
+        assert stage.entry.__name__ == f"photoshape_flow.{stage.module}" and stage.module.endswith("_stage")
     assert {s.name for s in REGISTRY if s.fans_out} == {"coarse-alignment", "fine-alignment", "substances",
                                                         "training-renders", "inference", "fit", "publish"}
 
@@ -100,7 +100,7 @@ def test_process_claims_each_item_once_and_reopens_failed_items(db_url: str, mon
         seen.append(work.ids)
         return StageReport("fine-alignment", done=len(work.ids))
 
-    monkeypatch.setitem(STAGES, "fine-alignment", dataclasses.replace(STAGES["fine-alignment"], run=fake_run))
+    monkeypatch.setattr(STAGES["fine-alignment"].entry, "run", fake_run)
     ctx = StageContext.create()
     first = process("fine-alignment", WorkUnit("pairs", (1, 2, 3)), "tiny", ctx)
     again = process("fine-alignment", WorkUnit("pairs", (2, 3, 4)), "tiny", ctx)

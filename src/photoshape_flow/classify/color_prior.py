@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from photoshape_flow.classify.assignment import median_lab
+from photoshape_flow.imaging.io import load_label_map, load_rgb
 
 if TYPE_CHECKING:
     from photoshape_flow.classify.dataset import RenderItem
@@ -85,8 +86,6 @@ def region_color_distances(
     without a colour are skipped; unreadable renders are logged and skipped. `limit` caps the renders
     read (in the given order, so the result is stable).
     """
-    from photoshape_flow.classify.dataset import load_label_map, load_rgb  # imports torch: only when used
-
     distances: list[float] = []
     for item in list(items)[: limit if limit is not None else None]:
         try:

@@ -27,6 +27,7 @@ from torch.utils.data import Dataset
 
 from photoshape_flow.classify.augment import augment, resize
 from photoshape_flow.classify.configs import AugmentConfig
+from photoshape_flow.imaging.io import load_label_map, load_rgb
 from photoshape_flow.imaging.squares import crop_square, square_box
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -51,31 +52,6 @@ class RegionExample:
     label: int  # index in the material head (0 = background)
     substance: int  # index in SUBSTANCE_LABELS (0 = background)
     pixels: int
-
-
-def load_rgb(path: Path) -> np.ndarray:
-    """An image file as RGB uint8 (H, W, 3); a one-line error naming the file when unreadable."""
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise ValueError(f"{path}: not a readable image")
-    return np.ascontiguousarray(image[..., ::-1])
-
-
-def load_label_map(path: Path) -> np.ndarray:
-    """A label map (uint16 PNG or .npy) as an integer (H, W) array."""
-    if path.suffix == ".npy":
-        array = np.load(path, allow_pickle=False)
-    else:
-        import cv2
-
-        array = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if array is None:
-            raise ValueError(f"{path}: not a readable label map")
-    if array.ndim != 2:
-        raise ValueError(f"{path}: label map must be single-channel, got shape {array.shape}")
-    return array
 
 
 def frame_object(image: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -33,10 +33,10 @@ def demo(
     from photoshape_flow.db import migrate
     from photoshape_flow.demo import generate_demo
     from photoshape_flow.flows.events import stage_context
+    from photoshape_flow.ingest.ingest_stage import COLLECTIONS, IngestRequest
     from photoshape_flow.profiles import resolve_profile
+    from photoshape_flow.publish.publish_stage import gallery_dir
     from photoshape_flow.stages import STAGE_NAMES, run_all
-    from photoshape_flow.stages.ingest import COLLECTIONS, IngestRequest
-    from photoshape_flow.stages.publish import gallery_dir
 
     setup_logging(verbose)
     settings = get_settings()
@@ -69,7 +69,7 @@ def demo(
                                                             on_stage=announce, wait=wait))
     print_reports(reports)
     if evaluate:
-        from photoshape_flow.pipeline.evaluate import run_evaluation
+        from photoshape_flow.scoring.evaluate import run_evaluation
 
         with cli_progress(console) as progress:
             run_name, metrics = run_evaluation(manifest.groundtruth, f"{source}-{time.strftime('%Y%m%d-%H%M%S')}",

@@ -72,8 +72,8 @@ def eval_command(
     <data_root>/evaluations/<run>.txt, stores them in `evaluation` (tagged with the file's sha256) and
     registers the file as the next default."""
     require_database()
-    from photoshape_flow.pipeline.evaluate import EVAL_STAGES, run_evaluation
-    from photoshape_flow.pipeline.groundtruth_registry import resolve_groundtruth
+    from photoshape_flow.scoring.evaluate import EVAL_STAGES, run_evaluation
+    from photoshape_flow.scoring.groundtruth_registry import resolve_groundtruth
 
     if path is not None and groundtruth is not None and path != groundtruth:
         fail(f"two ground truths given ({path} and --groundtruth {groundtruth}); give one")

@@ -41,7 +41,7 @@ def export(
     """Export PhotoShapes for use in other tools; assignment.json (licences included) always comes along."""
     require_database()
     method = method_or_published(method)
-    from photoshape_flow.pipeline.downloads import export_candidates
+    from photoshape_flow.publish.downloads import export_candidates
 
     try:
         chosen = parse_formats(formats)

@@ -40,7 +40,7 @@ def gallery(
     """
     require_database()
     method = method_or_published(method)
-    from photoshape_flow.pipeline.gallery_site import write_contact_sheet, write_gallery_site
+    from photoshape_flow.publish.gallery_site import write_contact_sheet, write_gallery_site
 
     with cli_progress(console) as progress:
         site = write_gallery_site(out, method, progress=progress)

@@ -29,7 +29,7 @@ def grade(
     from photoshape_flow.config import get_settings
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.grading import record_grade
+    from photoshape_flow.publish.grading import record_grade
 
     method = method_or_published(method)
     if label not in GRADES:

@@ -154,7 +154,7 @@ def shapes(
     verbose: bool = VerboseOpt,
 ) -> None:
     """OBJ+MTL, glTF/GLB, ShapeNetCore v2 trees and Sweet Home 3D catalogs (.sh3f)."""
-    from photoshape_flow.pipeline.ingest import IngestLimits, ingest_shapes
+    from photoshape_flow.ingest.ingest import IngestLimits, ingest_shapes
 
     _start(verbose, split)
     limits = IngestLimits(max_faces=max_faces, max_shape_bytes=int(max_file_mb * 1024 * 1024), timeout_s=timeout)
@@ -183,7 +183,7 @@ def exemplars(
     verbose: bool = VerboseOpt,
 ) -> None:
     """Product photos on white (JPEG/PNG/WebP): mask, square crop, resize, dedupe."""
-    from photoshape_flow.pipeline.ingest import IngestLimits, ingest_exemplars
+    from photoshape_flow.ingest.ingest import IngestLimits, ingest_exemplars
 
     _start(verbose)
     if size < 16:
@@ -210,7 +210,7 @@ def materials(
     """SVBRDF folders (maps recognised by name + material.json/.toml) and analytic materials."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.flows.events import PrefectEvents
-    from photoshape_flow.pipeline.ingest import ingest_materials
+    from photoshape_flow.ingest.ingest import ingest_materials
 
     _start(verbose)
     with _progress("materials") as progress:
@@ -232,7 +232,7 @@ def envmaps(
     verbose: bool = VerboseOpt,
 ) -> None:
     """Equirectangular HDR environment maps (.hdr, .exr)."""
-    from photoshape_flow.pipeline.ingest import ingest_envmaps
+    from photoshape_flow.ingest.ingest import ingest_envmaps
 
     _start(verbose, split)
     with _progress("envmaps") as progress:

@@ -34,9 +34,9 @@ def new_materials(
     """Re-fit and re-publish for materials the newest classifier does not know (no retraining)."""
     from photoshape_flow.cli.run_cmd import print_reports
     from photoshape_flow.flows.events import stage_context
-    from photoshape_flow.pipeline.new_materials import plan_material_rerun
     from photoshape_flow.pipeline.runs import effective_profile
     from photoshape_flow.stages import REGISTRY
+    from photoshape_flow.stages.new_materials import plan_material_rerun
     from photoshape_flow.stages.rerun import run_material_rerun
 
     setup_logging(verbose)

@@ -39,12 +39,11 @@ def retrieve(
     import numpy as np
     import sqlalchemy as sa
 
-    from photoshape_flow.classify.evidence import ClassifierEvidence
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.models import Classifier, Material
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.calibration import stored_color_prior
-    from photoshape_flow.pipeline.training import load_material_classifier
+    from photoshape_flow.networks.classifiers import load_material_classifier
+    from photoshape_flow.networks.evidence import stored_evidence
     from photoshape_flow.store import default_store
 
     if crop not in ("image", "mask"):
@@ -71,9 +70,9 @@ def retrieve(
         fail(str(exc))
     material_probs, substance_probs = model.predict(photo, masks, crop=crop)  # type: ignore[arg-type]
     with session_scope(settings.resolved_database_url) as session:
-        prior = stored_color_prior(session, default_store(settings), model.materials,
-                                   session.get(Classifier, row.id)) if color_prior else None
-    evidence = ClassifierEvidence.for_classifier(model, row.config, color_prior=prior)
+        evidence = stored_evidence(session, default_store(settings), session.get(Classifier, row.id), model,
+                                   color=color_prior)
+    prior = evidence.color_prior
     # with crop="mask" the head sees the region enlarged: its size in the photo does not matter
     parts = evidence.rank_regions(photo, masks, material_probs, substance_probs if substance_weighting else None,
                                   top, measured=crop == "image")

@@ -142,8 +142,8 @@ def print_announcement(reports: Sequence[StageReport]) -> None:
 
 def print_outputs(ctx: Any) -> None:
     """Where publish's results are: the gallery's index page and the exports folder."""
-    from photoshape_flow.pipeline.downloads import exports_root
-    from photoshape_flow.stages.publish import gallery_dir
+    from photoshape_flow.publish.downloads import exports_root
+    from photoshape_flow.publish.publish_stage import gallery_dir
 
     console.print(f"gallery:  {gallery_dir(ctx) / 'index.html'}", highlight=False, soft_wrap=True)
     console.print(f"exports:  {exports_root(ctx.settings)}", highlight=False, soft_wrap=True)
@@ -176,7 +176,7 @@ def publish_pairs(resolved: Any, ctx: Any, pairs: Sequence[int]) -> StageReport:
     Recorded as a run like any other. A pair that is no PhotoShape candidate (unknown, excluded, or
     without rank-1 assignments) gets one line and the others go on; none at all exits 1.
     """
-    from photoshape_flow.pipeline.photoshapes import candidate_method_keys
+    from photoshape_flow.publish.photoshapes import candidate_method_keys
     from photoshape_flow.stages import WorkUnit, finish, run_stage
     from photoshape_flow.stages.run import finish_run, record_report, start_run
 

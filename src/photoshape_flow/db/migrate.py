@@ -14,13 +14,12 @@ from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 
+import photoshape_flow.migrations as migrations
 from photoshape_flow.config import get_settings
 from photoshape_flow.db.session import get_engine
 
 
 def migrations_dir() -> Path:
-    import photoshape_flow.migrations as migrations
-
     return Path(migrations.__file__).parent
 
 

@@ -386,7 +386,7 @@ class Grade(TimestampMixin, Base):
     """A person's verdict on a PhotoShape, from the original code's result taxonomy.
 
     Keyed by what was graded, not by the pair alone: the method key and the assignment-set key
-    (`pipeline.photoshapes.assignment_set_keys`) of the rank-1 materials the PhotoShape showed, so
+    (`publish.photoshapes.assignment_set_keys`) of the rank-1 materials the PhotoShape showed, so
     a new classifier's (or a re-ranked) PhotoShape of the same pair starts ungraded while the old
     grade stays. NULL keys: a grade from before they were recorded whose PhotoShape is unknown.
     """

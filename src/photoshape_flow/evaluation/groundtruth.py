@@ -11,7 +11,7 @@ relative to the file).
 A bad entry (wrong JSON types, no parts, a mask value naming an unlisted part, a duplicate) gives one
 message naming it and is left out, so one typo never costs the whole evaluation; only a file that is
 not this format at all is an error (`GroundTruthError`). Names are checked against the database by
-`pipeline.groundtruth_match`, which keeps this module pure.
+`scoring.groundtruth_match`, which keeps this module pure.
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ HEADLINE_TITLE = ("ours, then each baseline: material top-1 / top-5 and substanc
 STAGES_TITLE = ("shared stages: recall and pose over exemplars of a collection shape (pose: those with a "
                 "camera), part labels over pairs of the true shape with a part mask, substances over parts")
 OURS = CLASSIFIER
-REFINED = "_refined"  # suffix of a rendered figure made with the rank-1 rows' refinements (`pipeline.rerender_eval`)
+REFINED = "_refined"  # suffix of a rendered figure made with the rank-1 rows' refinements (`scoring.rerender_eval`)
 MISSING = "-"
 
 

@@ -4,8 +4,8 @@ Pure functions on a `ShapeMesh`, per-part `MaterialSpec` (None = built-in) and `
 database. The UV transform of the renderer (texture-scale formula, then the jitter) is baked into
 every format's texcoords (see `export.geometry`).
 
-- `formats.EXPORTERS`: the registry of formats, one `Exporter` class each; everything that names
-  formats reads it.
+- `formats.EXPORTERS`: the table of formats (name, main file, description); everything that names
+  formats reads it. `writers.WRITERS`: the one writer of each, loaded only when a format is written.
 - `gltf.write_glb` / `gltf.write_gltf`: glTF 2.0, metallic-roughness (`export.pbr`), hand-written.
 - `mitsuba_xml.write_mitsuba_xml`: Mitsuba 3 scene from the renderer's `build_scene`.
 - `obj.write_obj`: OBJ + MTL (PBR extension) + textures.

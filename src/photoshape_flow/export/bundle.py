@@ -31,15 +31,9 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.export.formats import (
-    DEFAULT_FORMATS,
-    EXPORTERS,
-    SIDECAR,
-    SIDECAR_PATH,
-    ExportInput,
-    parse_formats,
-)
+from photoshape_flow.export.formats import DEFAULT_FORMATS, EXPORTERS, SIDECAR, SIDECAR_PATH, parse_formats
 from photoshape_flow.export.pbr import ResolveRef
+from photoshape_flow.export.writers import WRITERS, ExportInput
 from photoshape_flow.faults import fault_point
 
 # a relative file name with an extension the formats refer to (a number such as "0.5" is none)
@@ -64,7 +58,7 @@ def export_photoshape(
 ) -> dict[str, Path]:
     """Write the requested formats plus `assignment.json`; returns format (or `SIDECAR`) -> main file path.
 
-    The inputs are those of `export.formats.ExportInput`; each format's `Exporter` writes its part.
+    The inputs are those of `export.writers.ExportInput`; each format's writer (`WRITERS`) writes its part.
     """
     formats = parse_formats(list(formats))
     item = ExportInput(shape, materials, uv_transforms, document, envmap=envmap, camera=camera,
@@ -77,9 +71,9 @@ def export_photoshape(
     written: dict[str, Path] = {}
     try:
         for fmt in formats:
-            exporter = EXPORTERS[fmt]
-            exporter.write(stage / exporter.path, item)
-            written[fmt] = out / exporter.path
+            path = EXPORTERS[fmt].path
+            WRITERS[fmt](stage / path, item)
+            written[fmt] = out / path
             fault_point("export-writing")
         (stage / SIDECAR_PATH).write_text(json.dumps(document, indent=2, sort_keys=True, default=str))
         (stage / "ATTRIBUTION.txt").write_text("\n".join(item.attribution) + "\n")

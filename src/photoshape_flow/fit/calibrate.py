@@ -3,7 +3,7 @@
 The fit stage ranks a part's candidates by ``cost = w . x`` where x holds the candidate's distance
 terms (colour, contrast, gradient, highlight, deep; `fit.appearance.terms`) and its ranking prior cost (-log prior),
 and turns costs into scores with ``softmax(-cost / T)`` (`fit.select.scores_of`). Given cases where
-the true candidate is known (validation renders made to look like photos, `pipeline.fit_calibration`),
+the true candidate is known (validation renders made to look like photos, `fitting.calibration`),
 the weights and the temperature that make the true candidate most probable are the maximum of the
 conditional-logit likelihood ``prod_i softmax(-X_i theta)[true_i]`` with ``theta = w / T >= 0``.
 

@@ -3,7 +3,7 @@
 `FrameRenderer` renders a shape at a pair's camera in the exemplar's frame (the tight square crop of
 the silhouette, as fine alignment frames the part map). `estimate_lighting` and `measure_candidates`
 are the two render loops of the fit stage; they take render specs and return numbers, so tests run
-them on generated scenes and `pipeline.fit` on the database's pairs.
+them on generated scenes and `fitting.fit` on the database's pairs.
 """
 
 from __future__ import annotations

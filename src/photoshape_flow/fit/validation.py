@@ -1,6 +1,6 @@
 """A validation render seen the way the fit stage sees a product photo: framed, and its part map misaligned.
 
-The fit weights are fitted on validation renders (`pipeline.fit_calibration`), whose true material
+The fit weights are fitted on validation renders (`fitting.calibration`), whose true material
 per part is known; but the stage never sees a perfect part map. Fine alignment is off by a few pixels
 (a shift, a slightly wrong scale, a boundary too far in or out), so the render's exact part map is
 misaligned deterministically before it is used, or the weights would learn to trust pixel detail

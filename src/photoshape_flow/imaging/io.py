@@ -150,3 +150,31 @@ def read_map(
         if decoded is not None and decoded.dtype == np.uint16 and decoded.ndim == 3:
             return np.ascontiguousarray(decoded[..., [2, 1, 0]])
     return array
+
+
+# The pipeline's own renders and label maps (written by this package, read without the limits above)
+
+
+def load_rgb(path: Path) -> np.ndarray:
+    """An image file as RGB uint8 (H, W, 3); a one-line error naming the file when unreadable."""
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise ValueError(f"{path}: not a readable image")
+    return np.ascontiguousarray(image[..., ::-1])
+
+
+def load_label_map(path: Path) -> np.ndarray:
+    """A label map (uint16 PNG or .npy) as an integer (H, W) array."""
+    if path.suffix == ".npy":
+        array = np.load(path, allow_pickle=False)
+    else:
+        import cv2
+
+        array = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if array is None:
+            raise ValueError(f"{path}: not a readable label map")
+    if array.ndim != 2:
+        raise ValueError(f"{path}: label map must be single-channel, got shape {array.shape}")
+    return array

@@ -6,10 +6,11 @@
      'inference', 'fit', 'publish']
 """
 
+from photoshape_flow.pipeline.context import StageContext
+from photoshape_flow.pipeline.report import Blocked, StageReport
 from photoshape_flow.pipeline.runs import last_run_profile
-from photoshape_flow.stages.context import StageContext
+from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.stages.registry import REGISTRY, STAGE_NAMES, STAGES, Stage, get_stage
-from photoshape_flow.stages.report import Blocked, StageReport
 from photoshape_flow.stages.run import (
     finish,
     plan_batches,
@@ -18,7 +19,6 @@ from photoshape_flow.stages.run import (
     run_stage,
     stage_progress,
 )
-from photoshape_flow.stages.work import WorkUnit
 
 __all__ = [
     "REGISTRY", "STAGES", "STAGE_NAMES", "Blocked", "Stage", "StageContext", "StageReport", "WorkUnit",

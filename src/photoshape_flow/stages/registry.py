@@ -2,62 +2,75 @@
 
 `photoshape run`, `photoshape status`, the work claims, the Prefect flows, the deployments and the
 checks on `prefect.yaml` all read `REGISTRY`; no other table maps stage names to code. A new stage
-is one module with `run(ctx, cfg, work=None) -> StageReport` (plus `plan`/`finish` if it fans out,
-and `versions` if an item's inputs can change under the same id), one config dataclass on
-`Profile`, and one entry here.
+is one module in its domain package with `run(ctx, cfg, work=None) -> StageReport` (plus
+`plan`/`finish` if it fans out, and `versions` if an item's inputs can change under the same id),
+one config dataclass on `Profile`, and one entry here naming that module by its dotted path.
+
+The registry imports no stage module: a stage's module (and the torch, Mitsuba or numpy behind it)
+is imported the first time its code is asked for (`Stage.entry`), so flows, `photoshape status`
+and `photoshape claims` load the registry in milliseconds and without torch.
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 from sqlalchemy.orm import Session
 
 from photoshape_flow.pipeline import progress
+from photoshape_flow.pipeline.context import StageContext
+from photoshape_flow.pipeline.report import StageReport
+from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import Profile
-from photoshape_flow.stages import (
-    coarse_alignment,
-    fine_alignment,
-    fit,
-    inference,
-    ingest,
-    publish,
-    substances,
-    training,
-    training_renders,
-)
-from photoshape_flow.stages.context import StageContext
-from photoshape_flow.stages.report import StageReport
-from photoshape_flow.stages.work import WorkUnit
+
+PACKAGE = "photoshape_flow"
 
 
 @dataclass(frozen=True, repr=False)
 class Stage:
-    """One pipeline stage: its code, the tables it reads and writes, its counter, how it fans out."""
+    """One pipeline stage: its module, the tables it reads and writes, its counter, how it fans out."""
 
     name: str
     description: str  # one line: the flow's and the deployment's description
-    run: Callable[[StageContext, Any, Any], StageReport]
+    module: str  # dotted path, below the package, of the module with run/plan/finish/versions
     reads: tuple[str, ...]
     writes: tuple[str, ...]
     progress: Callable[[Session], progress.StageProgress]
-    plan: Callable[[StageContext, Any], list[WorkUnit]] | None = None  # set: the stage fans out
-    finish: Callable[[StageContext, Any], StageReport] | None = None  # after every unit of a fan-out
-    # a unit's item id -> key of its inputs: a done item whose key changed is claimed again (an id
-    # left out is keyed by the config alone); given the unit, not its ids, since parts differ
-    versions: Callable[[StageContext, Any, WorkUnit], dict[int, str]] | None = None
+    fans_out: bool = False  # the module has `plan` (and may have `finish` after every unit, `versions`)
     batch_size: int = 32  # items per unit of work in a fan-out
     claims_itself: bool = False  # the pipeline claims its items (finer than a batch)
     exclusive: bool = False  # whole-stage work that must not run twice at once (one flow run at a time)
     # part of retraining: makes a network's training data, trains it, or applies the retrained network
-    # (hours at paper scale); a triggered re-run leaves it to the nightly run (`pipeline.new_materials`)
+    # (hours at paper scale); a triggered re-run leaves it to the nightly run (`stages.new_materials`)
     retraining: bool = False
 
     @property
-    def fans_out(self) -> bool:
-        return self.plan is not None
+    def entry(self) -> ModuleType:
+        """The stage's module, imported on first use (cached in `sys.modules` thereafter)."""
+        return importlib.import_module(f"{PACKAGE}.{self.module}")
+
+    @property
+    def run(self) -> Callable[[StageContext, Any, Any], StageReport]:
+        return self.entry.run
+
+    @property
+    def plan(self) -> Callable[[StageContext, Any], list[WorkUnit]] | None:
+        return self.entry.plan if self.fans_out else None
+
+    @property
+    def finish(self) -> Callable[[StageContext, Any], StageReport] | None:
+        """After every unit of a fan-out (None: the stage has no finishing step)."""
+        return getattr(self.entry, "finish", None) if self.fans_out else None
+
+    @property
+    def versions(self) -> Callable[[StageContext, Any, WorkUnit], dict[int, str]] | None:
+        """A unit's item id -> key of its inputs: a done item whose key changed is claimed again (an id
+        left out is keyed by the config alone); given the unit, not its ids, since parts differ."""
+        return getattr(self.entry, "versions", None) if self.fans_out else None
 
     def __repr__(self) -> str:
         fan = f", fans out in batches of {self.batch_size}" if self.fans_out else ""
@@ -71,56 +84,53 @@ class Stage:
 REGISTRY: tuple[Stage, ...] = (
     Stage(
         "ingest", "Ingest the four collections (default: everything in <data_root>/inbox).",
-        ingest.run, reads=(), writes=("shape", "part", "exemplar", "material", "envmap", "rendering"),
+        "ingest.ingest_stage", reads=(), writes=("shape", "part", "exemplar", "material", "envmap", "rendering"),
         progress=progress.ingest_progress,
     ),
     Stage(
         "coarse-alignment", "Viewpoint sweeps and HOG descriptors, exact retrieval, shape-exemplar pairs.",
-        coarse_alignment.run, reads=("shape", "exemplar"),
+        "alignment.coarse_alignment_stage", reads=("shape", "exemplar"),
         writes=("viewpoint_set", "view_feature", "exemplar_feature", "exemplar_match", "pair"),
-        progress=progress.coarse_alignment_progress, plan=coarse_alignment.plan, finish=coarse_alignment.finish,
-        batch_size=8, versions=coarse_alignment.versions,
+        progress=progress.coarse_alignment_progress, fans_out=True, batch_size=8,
     ),
     Stage(
         "fine-alignment", "Project each pair's parts, flow-warp them onto the exemplar, clean with a dense CRF.",
-        fine_alignment.run, reads=("pair", "shape", "exemplar"), writes=("alignment", "rendering"),
-        progress=progress.fine_alignment_progress, plan=fine_alignment.plan, versions=fine_alignment.versions,
+        "alignment.fine_alignment_stage", reads=("pair", "shape", "exemplar"), writes=("alignment", "rendering"),
+        progress=progress.fine_alignment_progress, fans_out=True,
     ),
     Stage(
         "substances", "Bootstrap renders, the substance network, and a substance per aligned part.",
-        substances.run, reads=("alignment", "material", "envmap", "shape"),
+        "recognition.substances_stage", reads=("alignment", "material", "envmap", "shape"),
         writes=("rendering", "classifier", "part_substance"), progress=progress.substances_progress,
-        plan=substances.plan, finish=substances.finish, batch_size=16, versions=substances.versions, exclusive=True,
-        retraining=True,
+        fans_out=True, batch_size=16, exclusive=True, retraining=True,
     ),
     Stage(
         "training-renders", "Randomized renders conditioned on part substances (section 5.1), resumable.",
-        training_renders.run, reads=("part_substance", "material", "envmap", "shape"), writes=("rendering",),
-        progress=progress.training_renders_progress, plan=training_renders.plan, batch_size=16,
-        versions=training_renders.versions, retraining=True,
-    ),
-    Stage(
-        "training", "Train (or resume, or fine-tune when materials were added) the material classifier.",
-        training.run, reads=("rendering", "material"), writes=("classifier",), progress=progress.training_progress,
-        exclusive=True, retraining=True,
-    ),
-    Stage(
-        "inference", "Ranked materials per part for the classifier and the baselines (section 6.1).",
-        inference.run, reads=("alignment", "part_substance", "classifier", "material"), writes=("assignment",),
-        progress=progress.inference_progress, plan=inference.plan, batch_size=64, claims_itself=True,
+        "recognition.training_renders_stage", reads=("part_substance", "material", "envmap", "shape"),
+        writes=("rendering",), progress=progress.training_renders_progress, fans_out=True, batch_size=16,
         retraining=True,
     ),
     Stage(
+        "training", "Train (or resume, or fine-tune when materials were added) the material classifier.",
+        "recognition.training_stage", reads=("rendering", "material"), writes=("classifier",),
+        progress=progress.training_progress, exclusive=True, retraining=True,
+    ),
+    Stage(
+        "inference", "Ranked materials per part for the classifier and the baselines (section 6.1).",
+        "recognition.inference_stage", reads=("alignment", "part_substance", "classifier", "material"),
+        writes=("assignment",), progress=progress.inference_progress, fans_out=True, batch_size=64,
+        claims_itself=True, retraining=True,
+    ),
+    Stage(
         "fit", "Materials chosen by rendering each pair against its photo (lighting, candidates, scores).",
-        fit.run, reads=("assignment", "alignment", "exemplar", "material", "envmap", "shape"),
-        writes=("assignment", "exemplar"), progress=progress.fit_progress, plan=fit.plan, batch_size=16,
+        "fitting.fit_stage", reads=("assignment", "alignment", "exemplar", "material", "envmap", "shape"),
+        writes=("assignment", "exemplar"), progress=progress.fit_progress, fans_out=True, batch_size=16,
         claims_itself=True,
     ),
     Stage(
         "publish", "PhotoShape renders and exports of the best pairs, then the gallery.",
-        publish.run, reads=("assignment", "pair", "shape", "material", "envmap"), writes=("rendering",),
-        progress=progress.publish_progress, plan=publish.plan, finish=publish.finish, batch_size=8,
-        versions=publish.versions,
+        "publish.publish_stage", reads=("assignment", "pair", "shape", "material", "envmap"),
+        writes=("rendering",), progress=progress.publish_progress, fans_out=True, batch_size=8,
     ),
 )
 

@@ -1,21 +1,21 @@
 """The material-added re-run in this process: what `photoshape new-materials` runs.
 
-The plan is `pipeline.new_materials.plan_material_rerun` (fit then publish of the affected pairs, no
+The plan is `stages.new_materials.plan_material_rerun` (fit then publish of the affected pairs, no
 retraining); the `new-materials` flow runs the same plan through the stage flows. Each stage goes
 through the claims like any `photoshape run`; the fit report's details carry the changed-parts
-counts (`pipeline.fit_changes`), recorded with the run in `pipeline_run`.
+counts (`fitting.changes`), recorded with the run in `pipeline_run`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-from photoshape_flow.pipeline.fit_changes import FitChanges, fit_changes, fit_snapshot
-from photoshape_flow.pipeline.new_materials import MaterialRerun
+from photoshape_flow.fitting.changes import FitChanges, fit_changes, fit_snapshot
+from photoshape_flow.pipeline.context import StageContext
+from photoshape_flow.pipeline.report import StageReport
 from photoshape_flow.profiles import ResolvedProfile, resolve_profile
-from photoshape_flow.stages.context import StageContext
+from photoshape_flow.stages.new_materials import MaterialRerun
 from photoshape_flow.stages.registry import get_stage
-from photoshape_flow.stages.report import StageReport
 from photoshape_flow.stages.run import finish, finish_run, plan_batches, process, record_report, run_stage, start_run
 
 ORIGIN = "new-materials"  # `pipeline_run.origin` of a material-added re-run, CLI or flow

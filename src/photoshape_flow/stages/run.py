@@ -27,14 +27,14 @@ from photoshape_flow.db.base import utcnow
 from photoshape_flow.db.heartbeat import Heartbeat
 from photoshape_flow.db.holder import this_process
 from photoshape_flow.faults import fault_point
+from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.progress import StageProgress
+from photoshape_flow.pipeline.report import Blocked, StageReport, blocked_by
 from photoshape_flow.pipeline.runs import mark_dead_runs
+from photoshape_flow.pipeline.work import WorkUnit, claim_hash, item_hash
 from photoshape_flow.profiles import Profile, ResolvedProfile, resolve_profile
 from photoshape_flow.progress_sink import counted, labelled, nested
-from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.registry import REGISTRY, Stage, get_stage
-from photoshape_flow.stages.report import Blocked, StageReport, blocked_by
-from photoshape_flow.stages.work import WorkUnit, claim_hash, item_hash
 
 log = logging.getLogger(__name__)
 
