@@ -157,7 +157,7 @@ def published(db_url, store, tmp_path):  # type: ignore[no-untyped-def]
 
     from photoshape_flow.db import models as m
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
     with session_scope(db_url) as session:

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from photoshape_flow.cli import app
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.review_server import GradeRejected, GradeRequest
-from photoshape_flow.pipeline.review import DatabaseGrades
+from photoshape_flow.publish.review import DatabaseGrades
 
 PHOTOSHAPE = str(Path(sys.executable).with_name("photoshape"))
 
@@ -124,8 +124,8 @@ def test_review_in_chromium_turn_enlarge_grade_reload_filter(db_url, store, tmp_
     from photoshape_flow.export.node_tools import ProgramMissing
     from photoshape_flow.export.review_browser import review_flow
     from photoshape_flow.export.review_server import ReviewServer
-    from photoshape_flow.pipeline.gallery_site import write_gallery_site
-    from photoshape_flow.pipeline.publish import run_publish
+    from photoshape_flow.publish.gallery_site import write_gallery_site
+    from photoshape_flow.publish.publish import run_publish
 
     ids = seed(db_url, store, tmp_path)
     with session_scope(db_url) as session:  # give the 'broken' pair's material real maps: both pairs publish

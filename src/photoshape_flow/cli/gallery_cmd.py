@@ -69,8 +69,8 @@ def _serve(out: Path, method: str, host: str, port: int, grader: str) -> None:
     """Serve the written site until Ctrl-C or SIGTERM; then, if grades were given, rewrite the folder
     so its static pages show them too (the served pages read them from the database)."""
     from photoshape_flow.export.review_server import ReviewServer, is_loopback
-    from photoshape_flow.pipeline.gallery_site import write_gallery_site
-    from photoshape_flow.pipeline.review import DatabaseGrades
+    from photoshape_flow.publish.gallery_site import write_gallery_site
+    from photoshape_flow.publish.review import DatabaseGrades
 
     try:
         server = ReviewServer(out, DatabaseGrades(method, grader), host, port, on_grade=_print_grade)

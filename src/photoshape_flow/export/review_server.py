@@ -10,7 +10,7 @@ The folder `write_gallery` wrote stays a static, read-only site. Serving it adds
   request (the page reads it on load and patches its badges in);
 - ``POST /api/grade`` (JSON: ``pair_id``, ``label``, optional ``note``, ``method_key``,
   ``assignment_set``): one grade, written by the `GradeStore` the server is given (the CLI's
-  writes through `pipeline.grading.record_grade`, the code behind `photoshape grade`).
+  writes through `publish.grading.record_grade`, the code behind `photoshape grade`).
 
 Why the page reads grades from an endpoint instead of the server rewriting pages after a grade:
 the grades of now are one query, always the database's truth (a grade given meanwhile with
@@ -75,7 +75,7 @@ class GradeRequest:
 
 
 class GradeStore(Protocol):
-    """Where grades are read and written (`pipeline.review.DatabaseGrades` in the CLI)."""
+    """Where grades are read and written (`publish.review.DatabaseGrades` in the CLI)."""
 
     def current(self) -> Mapping[str, Mapping[str, Any]]:
         """``"<pair_id>/<method_key>"`` -> label, note, grader (None when ungraded) and the assignment

@@ -15,8 +15,8 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.export.review_server import GradeRejected, GradeRequest
-from photoshape_flow.pipeline.grading import current_grades, graded_photoshape, record_grade
-from photoshape_flow.pipeline.photoshapes import assignment_set_keys, candidate_method_keys
+from photoshape_flow.publish.grading import current_grades, graded_photoshape, record_grade
+from photoshape_flow.publish.photoshapes import assignment_set_keys, candidate_method_keys
 
 
 def grade_json(pair_id: int, method_key: str, grade: m.Grade | None, assignment_set: str | None) -> dict[str, Any]:
