@@ -76,6 +76,13 @@ class TrainingRendersConfig:
     count: int = 4000
     size: int = 128
     spp: int = 32
+    # the envmap's radiance scale per render (U(lo, hi)): the exposures photos are taken at
+    env_scale_range: tuple[float, float] = (0.9, 1.2)
+
+    def __post_init__(self) -> None:
+        low, high = self.env_scale_range
+        if not 0 < low <= high:
+            raise ProfileError(f"training_renders.env_scale_range: need 0 < low <= high, got {self.env_scale_range}")
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,7 @@ from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
+    ENV_SCALE_RANGE,
     SPEC_VERSION,
     PairCandidate,
     PairPosePrior,
@@ -298,6 +299,7 @@ def run_training_renders(
     val_fraction: float = VAL_FRACTION,
     saturation_threshold: float = SATURATION_THRESHOLD,
     renderer: RendererProtocol | None = None,
+    env_scale_range: tuple[float, float] = ENV_SCALE_RANGE,
     indices: Sequence[int] | None = None,
     progress: Progress | None = None,
     store: BlobStore | None = None,
@@ -354,6 +356,7 @@ def run_training_renders(
                     round_=round,
                     split=split,
                     shape_substances=pools.shape_substances,
+                    env_scale_range=env_scale_range,
                 )
                 inputs.load(session, spec)
                 specs.append((spec, inputs.params_hash(spec, size, spp, saturation_threshold)))

@@ -16,6 +16,7 @@ from photoshape_flow.profiles import TrainingRendersConfig
 from photoshape_flow.stages.context import StageContext
 from photoshape_flow.stages.report import StageReport
 from photoshape_flow.stages.work import WorkUnit
+from photoshape_flow.synth.spec import ENV_SCALE_RANGE
 
 NAME = "training-renders"
 
@@ -58,11 +59,17 @@ def pool_versions(ctx: StageContext, round_: str, unit: WorkUnit) -> dict[int, s
 
 
 def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> dict[int, str]:
-    return pool_versions(ctx, "training", unit)
+    """The pools' digest, and the exposure range when it is not the default (so widening it re-opens
+    done items, and databases made before the range was a setting keep their versions)."""
+    found = pool_versions(ctx, "training", unit)
+    if tuple(cfg.env_scale_range) == ENV_SCALE_RANGE:
+        return found
+    return {item: stable_hash([digest, list(cfg.env_scale_range)]) for item, digest in found.items()}
 
 
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
     summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer,
+                                   env_scale_range=tuple(cfg.env_scale_range),
                                    indices=None if work is None else work.ids, progress=ctx.progress,
                                    store=ctx.store)
     return StageReport(

@@ -256,6 +256,7 @@ def sample_render_spec(
     split: str = "train",
     shape_substances: Mapping[int, Mapping[int, Sequence[str]]] | None = None,
     name_prior: bool = True,
+    env_scale_range: tuple[float, float] = ENV_SCALE_RANGE,
 ) -> RenderSpec:
     """Draw one training-render spec (see the module docstring for the distributions).
 
@@ -265,6 +266,8 @@ def sample_render_spec(
       round (no observations: name prior, or uniform with `name_prior=False`).
     - `shape_substances`: shape_id -> {part_id: substances observed in any pair}, the prior for parts
       the drawn pair does not observe (falls back to the name prior).
+    - `env_scale_range`: the envmap's radiance scale is drawn uniformly from it (the exposure a photo
+      was taken at); one draw whatever the range, so widening it changes no other choice.
 
     The draw order is fixed, so the same `rng` state gives the same spec; discrete choices are
     rendezvous hashes (see the module docstring), stable when the collection grows.
@@ -287,7 +290,7 @@ def sample_render_spec(
         float(rng.uniform(*DISTANCE_RANGE)),
         float(rng.uniform(*FOV_RANGE)),
     )
-    env_scale = float(rng.uniform(*ENV_SCALE_RANGE))
+    env_scale = float(rng.uniform(*env_scale_range))
     env_rotation = float(rng.uniform(0.0, 2 * math.pi))
 
     candidates = pair_pose_prior.candidates
