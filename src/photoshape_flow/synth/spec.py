@@ -57,6 +57,21 @@ DEFAULT_POSE_ELEVATION = (0.0, math.pi / 6)
 SPEC_VERSION = 1
 
 
+def metered_gains(mean_luminance: Mapping[int, float]) -> dict[int, float]:
+    """Each envmap's radiance gain under a camera's auto-exposure: the median of the maps' mean
+    luminances over its own, so a dim night map and a bright courtyard light a product alike.
+
+    Photos are exposed for the product, whatever the light; real HDRIs differ in mean radiance by
+    5x and more, and without metering their renders come out black or clipped. Maps with no
+    positive mean keep gain 1.
+    """
+    positive = {k: float(v) for k, v in mean_luminance.items() if v and float(v) > 0}
+    if not positive:
+        return dict.fromkeys(mean_luminance, 1.0)
+    reference = float(np.median(list(positive.values())))
+    return {k: reference / positive[k] if k in positive else 1.0 for k in mean_luminance}
+
+
 def item_key(round_: str, split: str, index: int) -> str:
     """The natural key of one training render: ``<round>/<split>/<index:06d>``."""
     return f"{round_}/{split}/{index:06d}"
