@@ -27,10 +27,12 @@ def test_presets_are_the_classifier_configs_the_old_override_dicts_built() -> No
 def test_overrides_coerce_to_the_field_types() -> None:
     resolved = resolve_profile("small", ["training.epochs=3", "publish.formats=glb,obj",
                                          "training.max_steps_per_epoch=none", "ingest.previews=false",
-                                         "substances.network.lr=0.01"])
+                                         "substances.network.lr=0.01", "training_renders.env_scale_range=0.5,2",
+                                         "training.augment.tone=0.2"])
     p = resolved.profile
     assert (p.training.epochs, p.publish.formats, p.training.max_steps_per_epoch) == (3, ("glb", "obj"), None)
     assert p.ingest.previews is False and p.substances.network.lr == 0.01
+    assert p.training_renders.env_scale_range == (0.5, 2.0) and p.training.augment.tone == 0.2
     assert PROFILES["small"].training.epochs == 4  # the table itself is untouched
     record = resolved.record()
     assert record["name"] == "small" and record["overrides"]["training.epochs"] == "3"
@@ -47,6 +49,7 @@ def test_overrides_coerce_to_the_field_types() -> None:
     ("publish.formats.glb=1", "no fields to set"),
     ("name=other", "no field 'name'"),
     ("inference.methods=classifier,magic", "unknown method 'magic'"),
+    ("training_renders.env_scale_range=2,1", "need 0 < low <= high"),
 ])
 def test_bad_overrides_fail_with_one_line_naming_the_path(override: str, message: str) -> None:
     with pytest.raises(ProfileError, match=message):

@@ -59,6 +59,11 @@ class FineAlignmentConfig:
     size: int = 320
 
 
+def _check_exposure(section: str, exposure: str) -> None:
+    if exposure not in ("as-is", "metered"):
+        raise ProfileError(f"{section}.exposure: {exposure!r} is not as-is or metered")
+
+
 @dataclass(frozen=True)
 class SubstancesConfig:
     """Bootstrap renders and the substance network trained on them (section 4.3)."""
@@ -67,6 +72,10 @@ class SubstancesConfig:
     size: int = 128
     spp: int = 32
     network: SubstanceTrainConfig = SUBSTANCE_PRESETS["cpu"]
+    exposure: str = "as-is"  # of the bootstrap renders, as `TrainingRendersConfig.exposure`
+
+    def __post_init__(self) -> None:
+        _check_exposure("substances", self.exposure)
 
 
 @dataclass(frozen=True)
@@ -76,6 +85,17 @@ class TrainingRendersConfig:
     count: int = 4000
     size: int = 128
     spp: int = 32
+    # the envmap's radiance scale per render (U(lo, hi)): the exposures photos are taken at
+    env_scale_range: tuple[float, float] = (0.9, 1.2)
+    # "as-is": each envmap at its ingested radiance; "metered": scaled to the collection's median mean
+    # luminance first (a camera's auto-exposure; real HDRIs differ 5x in mean radiance)
+    exposure: str = "as-is"
+
+    def __post_init__(self) -> None:
+        low, high = self.env_scale_range
+        if not 0 < low <= high:
+            raise ProfileError(f"training_renders.env_scale_range: need 0 < low <= high, got {self.env_scale_range}")
+        _check_exposure("training_renders", self.exposure)
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -11,6 +12,7 @@ from photoshape_flow.classify.augment import (
     AugmentConfig,
     augment,
     gaussian_blur,
+    photo_degradation,
     rotate_hue,
     sample_affine,
     warp,
@@ -127,3 +129,17 @@ def test_blur_option_blurs_the_image_not_the_mask() -> None:
         assert edge(sharp_img) == pytest.approx(1.0)
         edges.append(edge(blur_img))
     assert sum(e < 0.6 for e in edges) >= 4
+
+
+def test_tone_curve_is_a_monotonic_gamma_that_keeps_black_and_white() -> None:
+    ramp = torch.linspace(0.0, 1.0, 64).view(1, 1, 64).repeat(3, 8, 1)
+    untouched = photo_degradation(ramp, AugmentConfig(), torch.Generator().manual_seed(0))
+    assert torch.equal(untouched, ramp)  # off by default: no draw, no change
+    exponents = []
+    for seed in range(20):
+        out = photo_degradation(ramp, AugmentConfig(tone=0.3), torch.Generator().manual_seed(seed))
+        assert float(out[..., 0].max()) == 0.0 and torch.allclose(out[..., -1], torch.ones(3, 8))
+        assert bool((out[..., 1:] >= out[..., :-1]).all())  # monotonic: the order of tones is kept
+        mid = float(out[0, 0, 32])
+        exponents.append(math.log(mid) / math.log(float(ramp[0, 0, 32])))
+    assert min(exponents) < 0.9 and max(exponents) > 1.1  # both brighter and darker curves are drawn

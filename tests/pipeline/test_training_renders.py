@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import sqlalchemy as sa
@@ -11,7 +12,7 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.recognition.training_renders import derived_val_shapes, load_pools, run_training_renders
-from photoshape_flow.synth.spec import RenderSpec
+from photoshape_flow.synth.spec import RenderSpec, metered_gains
 
 
 def _label_map(store, ref: str) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -161,3 +162,39 @@ def test_units_of_a_fan_out_render_what_one_call_renders(db_url: str, store, tmp
     for unit in units:
         process("substances", unit, profile, ctx)
     assert attempts() == [2] * 5
+
+
+def test_metered_gains_bring_every_map_to_the_median_mean() -> None:
+    gains = metered_gains({1: 0.2, 2: 1.0, 3: 5.0, 4: 0.0})
+    assert gains[2] == 1.0 and gains[1] == pytest.approx(5.0) and gains[3] == pytest.approx(0.2)
+    assert gains[4] == 1.0  # no measured mean: as ingested
+    assert metered_gains({1: 0.0}) == {1: 1.0}
+
+
+@pytest.mark.render
+def test_metered_exposure_scales_each_map_to_the_median_and_re_renders(db_url: str, store) -> None:  # type: ignore[no-untyped-def]
+    with session_scope(db_url) as session:
+        col = seed_collection(session, store, envmap_splits=("train", "train", "val"))
+        bright = min(col.envmaps)
+        for row in session.execute(sa.select(m.Envmap)).scalars():
+            row.meta = {"stats": {"mean_luminance": 4.0 if row.id == bright else 1.0}}  # median 1: gains 1/4, 1, 1
+
+    def object_radiance() -> dict[str, tuple[int, float]]:
+        out = {}
+        for row in _renderings(db_url, "bootstrap"):
+            covered = (_label_map(store, row.blobs["part_ids"]) > 0).astype(np.uint8)
+            # away from the silhouette, where the pixel filter blends the white background in
+            inside = cv2.erode(covered, np.ones((7, 7), np.uint8)) > 0
+            assert inside.sum() >= 10
+            out[row.key] = (row.envmap_id, float(store.load_image(row.blobs["hdr"])[inside].sum()))
+        return out
+
+    assert run_training_renders("bootstrap", count=8, size=64, spp=2)["rendered"] == 8
+    before = object_radiance()
+    assert bright in {envmap for envmap, _ in before.values()}
+    assert run_training_renders("bootstrap", count=8, size=64, spp=2, exposure="metered")["rendered"] == 8
+    for key, (envmap_id, radiance) in object_radiance().items():
+        expected = 0.25 if envmap_id == bright else 1.0  # the gain is in each item's hash: all re-rendered
+        assert radiance / before[key][1] == pytest.approx(expected, rel=0.1)
+    with pytest.raises(ValueError, match="exposure"):
+        run_training_renders("bootstrap", count=1, size=32, spp=2, exposure="auto")

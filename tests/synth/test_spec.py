@@ -144,3 +144,15 @@ def test_growing_the_collection_changes_few_items() -> None:
     assert 0.3 * len(keys) < new_pair < 0.7 * len(keys)  # still uniform over the two pairs
     same = [(g, b) for g, b in zip(grown, before, strict=True) if g.pair_id == 70 and g.pose == b.pose]
     assert same and all(g.to_dict() == b.to_dict() for g, b in same)
+
+
+def test_exposure_range_widens_the_envmap_scale_and_changes_nothing_else() -> None:
+    keys = [item_key("training", "train", i) for i in range(200)]
+    wide = [_spec(k, env_scale_range=(0.5, 2.0)) for k in keys]
+    default = [_spec(k) for k in keys]
+    scales = np.array([s.envmap.scale for s in wide])
+    assert scales.min() >= 0.5 and scales.max() <= 2.0 and scales.min() < 0.6 and scales.max() > 1.9
+    for a, b in zip(wide, default, strict=True):
+        da, db = a.to_dict(), b.to_dict()
+        da["envmap"].pop("scale"), db["envmap"].pop("scale")
+        assert da == db  # one draw whatever the range: camera, envmap, materials and UVs are the same

@@ -159,12 +159,15 @@ def augment(
 
 
 def photo_degradation(image: torch.Tensor, config: AugmentConfig, generator: torch.Generator) -> torch.Tensor:
-    """White balance, sensor noise and JPEG compression of a (3, H, W) image in [0, 1], each if enabled.
+    """Tone curve, white balance, sensor noise and JPEG compression of a (3, H, W) image in [0, 1], each
+    if enabled.
 
     The ranges follow what a product photo shows and a clean render does not (the demo's exemplar
     degradation, `demo.exemplars.sample_degradation`, is of the same kind; the ranges here are wider,
     as another camera's are).
     """
+    if config.tone:
+        image = image.clamp(0, 1) ** math.exp(float(torch.randn((), generator=generator)) * config.tone)
     if config.white_balance:
         gains = torch.exp(torch.randn(3, generator=generator, dtype=image.dtype) * config.white_balance)
         image = (image * (gains / (gains * torch.tensor([0.2126, 0.7152, 0.0722])).sum()).view(3, 1, 1)).clamp(0, 1)

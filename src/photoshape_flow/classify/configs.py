@@ -58,6 +58,7 @@ class AugmentConfig:
     blur: float = 0.0  # maximum Gaussian sigma in source pixels (0: off, as in the paper)
     # photo-like degradations (0: off, as in the paper): what a product photo shows and a clean render not
     white_balance: float = 0.0  # std of the log gain per channel (a camera's white balance)
+    tone: float = 0.0  # std of the log exponent of a random gamma curve (another camera's or renderer's tone)
     noise: float = 0.0  # maximum sensor-noise sigma, in 8-bit levels
     jpeg_quality: int = 0  # lowest JPEG quality drawn (up to 95); 0: never compressed
     min_mask_kept: float = 0.25

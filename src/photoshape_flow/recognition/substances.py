@@ -324,12 +324,13 @@ def run_substances(
     progress: Progress | None = None,
     renderer: RendererProtocol | None = None,
     store: BlobStore | None = None,
+    exposure: str = "as-is",
 ) -> dict[str, Any]:
     """The whole substances stage: bootstrap renders -> substance network -> PartSubstance rows."""
     settings = settings or get_settings()
     store = store if store is not None else default_store(settings)
     bootstrap = run_training_renders("bootstrap", bootstrap_count, size, spp, settings, batch=batch,
-                                     renderer=renderer, progress=progress, store=store)
+                                     renderer=renderer, progress=progress, store=store, exposure=exposure)
     return {"bootstrap": bootstrap,
             **train_and_assign(settings, size, train_config, train_overrides, progress, store=store)}
 

@@ -15,7 +15,8 @@ from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import SubstancesConfig
 from photoshape_flow.recognition.substances import run_substances, train_and_assign
 from photoshape_flow.recognition.training_renders import run_training_renders
-from photoshape_flow.recognition.training_renders_stage import pool_versions
+from photoshape_flow.recognition.training_renders_stage import exposure_versions, pool_versions
+from photoshape_flow.synth.spec import ENV_SCALE_RANGE
 
 NAME = "substances"
 
@@ -25,14 +26,15 @@ def plan(ctx: StageContext, cfg: SubstancesConfig) -> list[WorkUnit]:
 
 
 def versions(ctx: StageContext, cfg: SubstancesConfig, unit: WorkUnit) -> dict[int, str]:
-    return pool_versions(ctx, "bootstrap", unit)
+    return exposure_versions(pool_versions(ctx, "bootstrap", unit), ENV_SCALE_RANGE, cfg.exposure)
 
 
 def run(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit | None = None) -> StageReport:
     if work is not None:
         return _bootstrap(ctx, cfg, work)
     summary = run_substances(ctx.settings, bootstrap_count=cfg.bootstrap_count, size=cfg.size, spp=cfg.spp,
-                             train_config=cfg.network, progress=ctx.progress, renderer=ctx.renderer, store=ctx.store)
+                             train_config=cfg.network, progress=ctx.progress, renderer=ctx.renderer, store=ctx.store,
+                             exposure=cfg.exposure)
     return _report(summary, summary["bootstrap"])
 
 
@@ -46,7 +48,7 @@ def finish(ctx: StageContext, cfg: SubstancesConfig) -> StageReport:
 def _bootstrap(ctx: StageContext, cfg: SubstancesConfig, work: WorkUnit) -> StageReport:
     renders = run_training_renders("bootstrap", cfg.bootstrap_count, cfg.size, cfg.spp, ctx.settings,
                                    renderer=ctx.renderer, indices=work.ids, progress=ctx.progress,
-                                   store=ctx.store)
+                                   store=ctx.store, exposure=cfg.exposure)
     counts = {k: renders.get(k) for k in ("rendered", "skipped", "rejected", "failed")}
     return StageReport(NAME, done=int(renders["rendered"]), skipped=int(renders["skipped"]),
                        failed=int(renders["failed"]), rejected=int(renders["rejected"]), details={"bootstrap": counts})

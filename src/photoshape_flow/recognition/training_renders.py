@@ -35,7 +35,7 @@ import logging
 import time
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import sqlalchemy as sa
@@ -53,12 +53,14 @@ from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.synth.example import SATURATION_THRESHOLD, render_training_example
 from photoshape_flow.synth.spec import (
+    ENV_SCALE_RANGE,
     SPEC_VERSION,
     PairCandidate,
     PairPosePrior,
     PartInfo,
     RenderSpec,
     item_key,
+    metered_gains,
     spec_for_key,
 )
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED, SUBSTANCES
@@ -68,6 +70,8 @@ log = logging.getLogger(__name__)
 Round = Literal["bootstrap", "training"]
 ROUNDS: tuple[str, ...] = ("bootstrap", "training")
 SPLITS: tuple[str, ...] = ("train", "val")
+# how an envmap lights a training render: as ingested, or metered (`synth.spec.metered_gains`)
+EXPOSURES: tuple[str, ...] = ("as-is", "metered")
 VAL_FRACTION = 0.1
 CODE_VERSION = f"training-renders-v{SPEC_VERSION}"
 
@@ -234,6 +238,8 @@ class RenderInputs:
     meshes: dict[int, Any] = field(default_factory=dict)
     materials: dict[int, Any] = field(default_factory=dict)
     envmaps: dict[int, Any] = field(default_factory=dict)
+    # envmap id -> radiance gain (metered exposure); empty: every map as ingested
+    gains: dict[int, float] = field(default_factory=dict)
 
     def load(self, session: sa.orm.Session, spec: RenderSpec) -> None:
         if spec.shape_id not in self.shapes:
@@ -253,18 +259,19 @@ class RenderInputs:
             for p in spec.parts
         }
         envmap = self.envmaps[spec.envmap.envmap_id]
-        return stable_hash(
-            {
-                "code": CODE_VERSION,
-                "spec": spec.to_dict(),
-                "size": size,
-                "spp": spp,
-                "saturation_threshold": threshold,
-                "mesh": shape.mesh_blob,
-                "materials": materials,
-                "envmap": envmap.blob,
-            }
-        )
+        params = {
+            "code": CODE_VERSION,
+            "spec": spec.to_dict(),
+            "size": size,
+            "spp": spp,
+            "saturation_threshold": threshold,
+            "mesh": shape.mesh_blob,
+            "materials": materials,
+            "envmap": envmap.blob,
+        }
+        if self.gains:  # only when metered, so renders made before metering existed keep their hashes
+            params["envmap_gain"] = self.gains.get(spec.envmap.envmap_id, 1.0)
+        return stable_hash(params)
 
     def mesh(self, shape_id: int) -> Any:
         if shape_id not in self.meshes:
@@ -275,7 +282,14 @@ class RenderInputs:
         return {p.material_id: material_spec(self.materials[p.material_id], self.store) for p in spec.parts}
 
     def envmap_spec(self, envmap_id: int) -> Any:
-        return envmap_spec(self.envmaps[envmap_id], self.store)
+        spec = envmap_spec(self.envmaps[envmap_id], self.store)
+        return replace(spec, scale=spec.scale * self.gains[envmap_id]) if envmap_id in self.gains else spec
+
+
+def envmap_mean_luminance(session: sa.orm.Session) -> dict[int, float]:
+    """Enabled envmaps' mean luminance as ingest measured it (`meta.stats`; 0 when unknown)."""
+    rows = session.execute(sa.select(m.Envmap.id, m.Envmap.meta).where(m.Envmap.enabled.is_(True))).all()
+    return {int(i): float(((meta or {}).get("stats") or {}).get("mean_luminance") or 0.0) for i, meta in rows}
 
 
 def _existing(session: sa.orm.Session, kind: str, keys: Sequence[str]) -> dict[str, tuple[str, str]]:
@@ -298,6 +312,8 @@ def run_training_renders(
     val_fraction: float = VAL_FRACTION,
     saturation_threshold: float = SATURATION_THRESHOLD,
     renderer: RendererProtocol | None = None,
+    env_scale_range: tuple[float, float] = ENV_SCALE_RANGE,
+    exposure: str = "as-is",
     indices: Sequence[int] | None = None,
     progress: Progress | None = None,
     store: BlobStore | None = None,
@@ -318,6 +334,8 @@ def run_training_renders(
     store = store if store is not None else default_store(settings)
     with session_scope(url) as session:
         pools = load_pools(session, round, val_fraction)
+    if exposure not in EXPOSURES:
+        raise ValueError(f"exposure must be one of {EXPOSURES}, got {exposure!r}")
     per_split = split_counts(count, pools, val_fraction)
     for warning in pools.warnings if indices is None or 0 in indices else ():  # once a round, not per batch
         log.warning("%s round: %s", round, warning)
@@ -326,6 +344,9 @@ def run_training_renders(
     if indices is not None:
         keys = [keys[i] for i in sorted(set(indices)) if 0 <= i < len(keys)]
     inputs = RenderInputs(store=store)
+    if exposure == "metered":
+        with session_scope(url) as session:
+            inputs.gains = metered_gains(envmap_mean_luminance(session))
     summary: dict[str, Any] = {
         "round": round, "requested": count, "splits": per_split, "rendered": 0, "skipped": 0,
         "rejected": 0, "failed": 0, "render_seconds": 0.0, "pose_source": pools.pose_source,
@@ -354,6 +375,7 @@ def run_training_renders(
                     round_=round,
                     split=split,
                     shape_substances=pools.shape_substances,
+                    env_scale_range=env_scale_range,
                 )
                 inputs.load(session, spec)
                 specs.append((spec, inputs.params_hash(spec, size, spp, saturation_threshold)))

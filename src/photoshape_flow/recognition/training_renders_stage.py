@@ -16,6 +16,7 @@ from photoshape_flow.pipeline.report import StageReport
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import TrainingRendersConfig
 from photoshape_flow.recognition.training_renders import load_pools, run_training_renders
+from photoshape_flow.synth.spec import ENV_SCALE_RANGE
 
 NAME = "training-renders"
 
@@ -57,12 +58,21 @@ def pool_versions(ctx: StageContext, round_: str, unit: WorkUnit) -> dict[int, s
     return dict.fromkeys(unit.ids, digest)
 
 
+def exposure_versions(found: dict[int, str], env_scale_range: tuple[float, float], exposure: str) -> dict[int, str]:
+    """The pools' digests, joined by the exposure settings when they are not the defaults (so changing
+    them re-opens done items, and databases made before they were settings keep their versions)."""
+    if tuple(env_scale_range) == ENV_SCALE_RANGE and exposure == "as-is":
+        return found
+    return {item: stable_hash([digest, list(env_scale_range), exposure]) for item, digest in found.items()}
+
+
 def versions(ctx: StageContext, cfg: TrainingRendersConfig, unit: WorkUnit) -> dict[int, str]:
-    return pool_versions(ctx, "training", unit)
+    return exposure_versions(pool_versions(ctx, "training", unit), cfg.env_scale_range, cfg.exposure)
 
 
 def run(ctx: StageContext, cfg: TrainingRendersConfig, work: WorkUnit | None = None) -> StageReport:
     summary = run_training_renders("training", cfg.count, cfg.size, cfg.spp, ctx.settings, renderer=ctx.renderer,
+                                   env_scale_range=tuple(cfg.env_scale_range), exposure=cfg.exposure,
                                    indices=None if work is None else work.ids, progress=ctx.progress,
                                    store=ctx.store)
     return StageReport(

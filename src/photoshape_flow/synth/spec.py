@@ -57,6 +57,21 @@ DEFAULT_POSE_ELEVATION = (0.0, math.pi / 6)
 SPEC_VERSION = 1
 
 
+def metered_gains(mean_luminance: Mapping[int, float]) -> dict[int, float]:
+    """Each envmap's radiance gain under a camera's auto-exposure: the median of the maps' mean
+    luminances over its own, so a dim night map and a bright courtyard light a product alike.
+
+    Photos are exposed for the product, whatever the light; real HDRIs differ in mean radiance by
+    5x and more, and without metering their renders come out black or clipped. Maps with no
+    positive mean keep gain 1.
+    """
+    positive = {k: float(v) for k, v in mean_luminance.items() if v and float(v) > 0}
+    if not positive:
+        return dict.fromkeys(mean_luminance, 1.0)
+    reference = float(np.median(list(positive.values())))
+    return {k: reference / positive[k] if k in positive else 1.0 for k in mean_luminance}
+
+
 def item_key(round_: str, split: str, index: int) -> str:
     """The natural key of one training render: ``<round>/<split>/<index:06d>``."""
     return f"{round_}/{split}/{index:06d}"
@@ -256,6 +271,7 @@ def sample_render_spec(
     split: str = "train",
     shape_substances: Mapping[int, Mapping[int, Sequence[str]]] | None = None,
     name_prior: bool = True,
+    env_scale_range: tuple[float, float] = ENV_SCALE_RANGE,
 ) -> RenderSpec:
     """Draw one training-render spec (see the module docstring for the distributions).
 
@@ -265,6 +281,8 @@ def sample_render_spec(
       round (no observations: name prior, or uniform with `name_prior=False`).
     - `shape_substances`: shape_id -> {part_id: substances observed in any pair}, the prior for parts
       the drawn pair does not observe (falls back to the name prior).
+    - `env_scale_range`: the envmap's radiance scale is drawn uniformly from it (the exposure a photo
+      was taken at); one draw whatever the range, so widening it changes no other choice.
 
     The draw order is fixed, so the same `rng` state gives the same spec; discrete choices are
     rendezvous hashes (see the module docstring), stable when the collection grows.
@@ -287,7 +305,7 @@ def sample_render_spec(
         float(rng.uniform(*DISTANCE_RANGE)),
         float(rng.uniform(*FOV_RANGE)),
     )
-    env_scale = float(rng.uniform(*ENV_SCALE_RANGE))
+    env_scale = float(rng.uniform(*env_scale_range))
     env_rotation = float(rng.uniform(0.0, 2 * math.pi))
 
     candidates = pair_pose_prior.candidates
