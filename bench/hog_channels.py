@@ -33,7 +33,8 @@ import numpy as np
 
 from photoshape_flow.align.descriptors import HogParams, prepare, to_grey
 from photoshape_flow.align.hog import CHANNEL_SETS, channel_indices, hog
-from photoshape_flow.align.retrieval import ArrayDatabase, recall_at_k, search
+from photoshape_flow.align.index import ArrayDatabase
+from photoshape_flow.align.retrieval import recall_at_k, search
 from photoshape_flow.align.viewpoints import PAPER_456, angular_errors_deg, viewpoint_array, viewpoints
 
 RESULTS = Path(__file__).resolve().parent / "results"

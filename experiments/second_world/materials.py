@@ -20,7 +20,8 @@ import cv2
 import numpy as np
 
 from experiments.second_world.plan import LibraryMaterial, Variant
-from photoshape_flow.demo.materials import select_recipes, write_material
+from photoshape_flow.demo.material_catalogue import select_recipes
+from photoshape_flow.demo.materials import write_material
 
 DEMO_PER_SUBSTANCE = 4
 DEMO_SEED = 7  # the procedural maps' own seed (fixed: the library does not change with the world's seed)

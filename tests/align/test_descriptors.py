@@ -86,7 +86,8 @@ def test_params_name_dims_and_hash() -> None:
 @pytest.mark.render
 def test_rendered_shape_retrieves_itself_at_its_pose() -> None:
     from photoshape_flow.align.descriptors import render_view_descriptors
-    from photoshape_flow.align.retrieval import ArrayDatabase, search
+    from photoshape_flow.align.index import ArrayDatabase
+    from photoshape_flow.align.retrieval import search
     from photoshape_flow.align.viewpoints import ViewpointParams, viewpoints
     from photoshape_flow.render.renderer import Renderer
     from photoshape_flow.render.testing import box_part, normalise_to_unit_cube

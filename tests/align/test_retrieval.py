@@ -5,16 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from photoshape_flow.align.retrieval import (
-    ArrayDatabase,
-    Matches,
-    ShardListDatabase,
-    brute_force,
-    invert,
-    merge_matches,
-    recall_at_k,
-    search,
-)
+from photoshape_flow.align.index import ArrayDatabase, Matches, ShardListDatabase, invert, merge_matches
+from photoshape_flow.align.retrieval import brute_force, recall_at_k, search
 
 
 def _int_data(seed: int, shapes: int, views: int, dims: int, queries: int, high: int = 3):

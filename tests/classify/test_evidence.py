@@ -66,7 +66,7 @@ def test_the_former_callers_rank_a_region_alike(tmp_path: Path, settings_env: Pa
     import photoshape_flow.networks.evidence as evidence
     import photoshape_flow.recognition.calibration as calibration
     from photoshape_flow.cli import retrieve_cmd
-    from photoshape_flow.recognition.inference import PartSubstanceView, _PartInput, _rank_part
+    from photoshape_flow.recognition.part_evidence import PartInput, PartSubstanceView, rank_part
 
     image, ids, masks = scene()
     model, config, k = FakeClassifier(), {"architecture": "fake"}, 4  # a row config without min_region_fraction
@@ -87,13 +87,13 @@ def test_the_former_callers_rank_a_region_alike(tmp_path: Path, settings_env: Pa
         monkeypatch.setattr(module, "load_label_map", lambda _: ids)
     built = ClassifierEvidence.for_classifier(model, config, enabled=frozenset(MATERIALS), color_prior=(LABS, SIGMA))
 
-    # the inference stage (its _Context builds `built` from the classifier row the same way)
+    # the inference stage (its RankingContext builds `built` from the classifier row the same way)
     ctx = SimpleNamespace(method="classifier", evidence=built, top_k=k, substance_weights=lambda _: HEAD_SUBSTANCES)
     inference = {}
     for material, mask in masks.items():
-        item = _PartInput(SimpleNamespace(id=material), mask, PartSubstanceView(None, {}, True))
+        item = PartInput(SimpleNamespace(id=material), mask, PartSubstanceView(None, {}, True))
         batch = {material: tuple(a[0] for a in model.predict(image, [mask]))}
-        inference[material] = [(r.material_id, r.score, r.posterior) for r in _rank_part(ctx, image, ids > 0, item, 1,
+        inference[material] = [(r.material_id, r.score, r.posterior) for r in rank_part(ctx, image, ids > 0, item, 1,
                                                                                         batch)]
         assert (item.color is not None) and item.head is (material == 10)
     # the fit calibration's RenderRanker

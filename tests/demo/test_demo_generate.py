@@ -10,10 +10,18 @@ import pytest
 
 from photoshape_flow.demo import SizePreset, generate_demo, load_groundtruth
 from photoshape_flow.demo.envmaps import studio_specs
-from photoshape_flow.demo.exemplars import ELEVATION_RANGE, FOV_RANGE, degrade, sample_camera, sample_degradation
-from photoshape_flow.demo.generate import SIZES, collection_shapes, heldout_shapes, plan_exemplars
-from photoshape_flow.demo.materials import select_recipes
+from photoshape_flow.demo.exemplars import (
+    ELEVATION_RANGE,
+    FOV_RANGE,
+    degrade,
+    plan_exemplars,
+    sample_camera,
+    sample_degradation,
+)
+from photoshape_flow.demo.material_catalogue import select_recipes
 from photoshape_flow.demo.seeding import child_rng
+from photoshape_flow.demo.shapes import collection_shapes, heldout_shapes
+from photoshape_flow.demo.sizes import SIZES
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.render.camera import Camera
 from photoshape_flow.vocab import SUBSTANCES

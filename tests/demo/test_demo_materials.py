@@ -10,13 +10,8 @@ import numpy as np
 import pytest
 
 from photoshape_flow.demo import noise
-from photoshape_flow.demo.materials import (
-    CATALOGUE,
-    MAX_PER_SUBSTANCE,
-    generate_maps,
-    select_recipes,
-    write_material,
-)
+from photoshape_flow.demo.material_catalogue import CATALOGUE, MAX_PER_SUBSTANCE, select_recipes
+from photoshape_flow.demo.materials import generate_maps, write_material
 from photoshape_flow.vocab import SUBSTANCES
 
 RES = 128  # small maps keep the tests fast; patterns are resolution independent

@@ -45,13 +45,8 @@ except ImportError:  # an installed package named "tests" shadows this repositor
     substance_of, write_renders = _regiondata.substance_of, _regiondata.write_renders
     SUBSTANCE_COLOURS, toy_substances = _regiondata.SUBSTANCE_COLOURS, _regiondata.toy_substances
 
-from photoshape_flow.align.retrieval import (
-    ArrayDatabase,
-    ShardListDatabase,
-    brute_force,
-    recall_at_k,
-    search,
-)
+from photoshape_flow.align.index import ArrayDatabase, ShardListDatabase
+from photoshape_flow.align.retrieval import brute_force, recall_at_k, search
 from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.configs import AugmentConfig
 from photoshape_flow.classify.configs import get_config as classifier_config

@@ -14,7 +14,8 @@ import pytest
 import sqlalchemy as sa
 
 from photoshape_flow.align.descriptors import HogParams
-from photoshape_flow.align.retrieval import ArrayDatabase, search
+from photoshape_flow.align.index import ArrayDatabase
+from photoshape_flow.align.retrieval import search
 from photoshape_flow.align.viewpoints import ViewpointParams, viewpoints
 from photoshape_flow.alignment.coarse.pairs import DROPPED_REASON
 from photoshape_flow.alignment.coarse.reverse_index import match_scope

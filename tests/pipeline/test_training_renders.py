@@ -11,7 +11,8 @@ from tests.synth.collection import seed_collection
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.recognition.training_renders import derived_val_shapes, load_pools, run_training_renders
+from photoshape_flow.recognition.render_pools import derived_val_shapes, load_pools
+from photoshape_flow.recognition.training_renders import run_training_renders
 from photoshape_flow.synth.spec import RenderSpec, metered_gains
 
 

@@ -21,6 +21,16 @@ NAMING_CONVENTION = {
 JSONType = sa.JSON().with_variant(postgresql.JSONB(), "postgresql")
 
 
+# Column types shared by the models.
+Str = sa.String(255)
+Short = sa.String(32)
+
+
+def fk(target: str, ondelete: str = "CASCADE") -> sa.ForeignKey:
+    """A foreign key that follows its row: deleting the target deletes (or, with SET NULL, unlinks) it."""
+    return sa.ForeignKey(target, ondelete=ondelete)
+
+
 def utcnow() -> dt.datetime:
     return dt.datetime.now(dt.UTC)
 
@@ -68,6 +78,19 @@ class ExcludeMixin:
 
     exclude: Mapped[bool] = mapped_column(default=False, server_default=sa.false())
     exclude_reason: Mapped[str | None] = mapped_column(sa.Text)
+
+
+class SourcedItemMixin:
+    """An ingested item keyed by where it came from (`source`, `source_id`), with a name and category.
+
+    `sort_order` keeps these columns first, in this order, as each table declared them before.
+    """
+
+    id: Mapped[int] = mapped_column(primary_key=True, sort_order=-1)
+    source: Mapped[str] = mapped_column(sa.String(64), sort_order=-1)
+    source_id: Mapped[str] = mapped_column(Str, sort_order=-1)
+    name: Mapped[str | None] = mapped_column(Str, sort_order=-1)
+    category: Mapped[str | None] = mapped_column(sa.String(64), index=True, sort_order=-1)
 
 
 class ProvenanceMixin:

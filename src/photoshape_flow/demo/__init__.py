@@ -6,7 +6,7 @@ eval` reads (docs/evaluation.md); `load_groundtruth(path)` reads it back with th
 as typed dataclasses for the benches and experiments. Pure science package: no database, no Prefect.
 """
 
-from photoshape_flow.demo.generate import SIZES, DemoManifest, SizePreset, generate_demo
+from photoshape_flow.demo.generate import DemoManifest, generate_demo
 from photoshape_flow.demo.groundtruth import (
     CameraTruth,
     ExemplarTruth,
@@ -17,6 +17,7 @@ from photoshape_flow.demo.groundtruth import (
     load_groundtruth,
     newest_groundtruth,
 )
+from photoshape_flow.demo.sizes import SIZES, SizePreset
 
 __all__ = [
     "SIZES",

@@ -5,22 +5,29 @@ drawn from the collection under the substance prior, lit by a held-out studio, s
 photo camera (elevation in [-pi/16, pi/4] like the coarse-alignment rings, any azimuth, fov 50-60,
 distance chosen so the object fills the frame), rendered on white, then degraded: exposure and
 white-balance jitter, a slight blur, sensor noise and JPEG. Its part mask (exact part ids from the
-same camera) is the ground truth for alignment, substance and material evaluation.
+same camera) is the ground truth for alignment, substance and material evaluation. `plan_exemplars`
+decides all of it per exemplar (so a plan can be hashed and skipped); `render_exemplar` renders one.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from photoshape_flow.demo.envmaps import StudioSpec
 from photoshape_flow.demo.furniture.model import SUBSTANCE_PRIOR, Furniture
-from photoshape_flow.demo.materials import MaterialRecipe
+from photoshape_flow.demo.material_catalogue import MaterialRecipe
+from photoshape_flow.demo.seeding import child_rng
+from photoshape_flow.demo.sizes import SizePreset
 from photoshape_flow.render.camera import Camera
-from photoshape_flow.render.specs import linear_to_srgb
+from photoshape_flow.render.protocol import RendererProtocol
+from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec, linear_to_srgb
+from photoshape_flow.vocab import SUBSTANCES
 
 ELEVATION_RANGE = (-math.pi / 16, math.pi / 4)
 FOV_RANGE = (50.0, 60.0)
@@ -159,3 +166,94 @@ def encode_mask(mask: np.ndarray) -> bytes:
     if not ok:
         raise RuntimeError("PNG encoding failed")
     return buf.tobytes()
+
+
+# -- planning and rendering -----------------------------------------------------------------------
+
+
+def plan_exemplars(
+    seed: int,
+    preset: SizePreset,
+    collection: list[Furniture],
+    heldout: list[tuple[Furniture, str]],
+    recipes: list[MaterialRecipe],
+    studios: list[StudioSpec],
+) -> list[ExemplarPlan]:
+    """Which shape, materials, camera, light and degradation each exemplar gets.
+
+    Two in five exemplars show a held-out shape (retrieval can only find a similar one); the others
+    show a collection shape. Material assignments never repeat for the same shape.
+    """
+    by_substance: dict[str, list[MaterialRecipe]] = {s: [r for r in recipes if r.substance == s] for s in SUBSTANCES}
+    order = child_rng(seed, "exemplar-order").permutation(len(collection))
+    used: set[tuple] = set()
+    plans = []
+    n_coll = n_held = 0
+    for k in range(preset.exemplars):
+        rng = child_rng(seed, "exemplar", k)
+        if heldout and k % 5 in (1, 3):
+            furniture, similar_to = heldout[n_held % len(heldout)]
+            in_collection = False
+            n_held += 1
+        else:
+            furniture, similar_to = collection[int(order[n_coll % len(collection)])], None
+            in_collection = True
+            n_coll += 1
+        vertices = np.concatenate([c.piece.vertices for p in furniture.parts for c in p.components])
+        camera = sample_camera(rng, vertices)
+        for _ in range(50):
+            assignment = assign_materials(rng, furniture, by_substance)
+            key = (furniture.source_id, tuple(sorted((n, r.name) for n, r in assignment.items())))
+            if key not in used:
+                break
+        used.add(key)
+        studio = studios[int(rng.integers(len(studios)))]
+        plans.append(
+            ExemplarPlan(
+                stem=f"ex_{k:04d}",
+                shape_id=furniture.source_id,
+                in_collection=in_collection,
+                similar_to=similar_to,
+                camera=camera,
+                materials={n: r.name for n, r in assignment.items()},
+                substances={n: r.substance for n, r in assignment.items()},
+                envmap={
+                    "name": studio.name,
+                    "rotation": round(float(rng.uniform(0, 2 * math.pi)), 6),
+                    "scale": round(float(rng.uniform(0.9, 1.2)), 4),
+                },
+                degradation=sample_degradation(rng),
+                size=preset.exemplar_size,
+                spp=preset.spp,
+                render_seed=int(rng.integers(0, 2**31 - 1)),
+            )
+        )
+    return plans
+
+
+def _material_spec(folder: Path, recipe: MaterialRecipe):
+    maps = {ch: folder / f"{ch}.png" for ch in ("albedo", "roughness", "metallic", "normal")}
+    return MaterialSpec(name=recipe.name, substance=recipe.substance, maps=maps, scale=recipe.scale)
+
+
+def render_exemplar(
+    renderer: RendererProtocol,
+    furniture: Furniture,
+    plan: ExemplarPlan,
+    material_dirs: dict[str, Path],
+    recipes: dict[str, MaterialRecipe],
+    envmap_path: Path,
+) -> tuple[bytes, np.ndarray]:
+    """(JPEG bytes, part-index mask) of one planned exemplar."""
+    shape = furniture.to_shape_mesh()
+    camera = Camera.from_dict(plan.camera)
+    materials = [
+        _material_spec(material_dirs[plan.materials[p.name]], recipes[plan.materials[p.name]]) for p in shape.parts
+    ]
+    envmap = EnvmapSpec(envmap_path, scale=plan.envmap["scale"], rotation=plan.envmap["rotation"])
+    result = renderer.beauty(
+        shape, materials, camera, envmap, size=plan.size, spp=plan.spp, background="transparent", seed=plan.render_seed
+    )
+    image = degrade(result.hdr, result.alpha, plan.degradation)
+    mask = renderer.part_ids(shape, camera, size=plan.size)
+    return encode_jpeg(image, plan.degradation["jpeg_quality"]), mask

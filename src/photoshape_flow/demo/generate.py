@@ -17,99 +17,30 @@ an exemplar whose inputs hash the same as the recorded one is not rendered again
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from photoshape_flow.demo.envmaps import StudioSpec, studio_specs, write_studio
-from photoshape_flow.demo.exemplars import (
-    ExemplarPlan,
-    assign_materials,
-    degrade,
-    encode_jpeg,
-    encode_mask,
-    sample_camera,
-    sample_degradation,
-)
-from photoshape_flow.demo.furniture import generate_furniture
-from photoshape_flow.demo.furniture.design import KIND_WEIGHTS, KINDS, perturb_design
-from photoshape_flow.demo.furniture.model import Furniture
+from photoshape_flow.demo.envmaps import studio_specs, write_studio
+from photoshape_flow.demo.exemplars import encode_mask, plan_exemplars, render_exemplar
 from photoshape_flow.demo.groundtruth import GROUNDTRUTH_FORMAT, GROUNDTRUTH_VERSION
-from photoshape_flow.demo.materials import MAP_CHANNELS, MaterialRecipe, select_recipes, write_material
-from photoshape_flow.demo.obj import mtl_text, obj_text
-from photoshape_flow.demo.seeding import child_rng
-from photoshape_flow.demo.writing import write_bytes, write_text
+from photoshape_flow.demo.material_catalogue import select_recipes
+from photoshape_flow.demo.materials import MAP_CHANNELS, write_material
+from photoshape_flow.demo.shapes import collection_shapes, heldout_shapes, shape_entry, write_shape
+from photoshape_flow.demo.sizes import SIZES, DemoSize, SizePreset
+from photoshape_flow.demo.writing import sha256_hex, write_bytes, write_text
 from photoshape_flow.hashing import stable_hash
-from photoshape_flow.render.camera import Camera
 from photoshape_flow.render.factory import default_renderer
 from photoshape_flow.render.protocol import RendererProtocol
-from photoshape_flow.render.specs import EnvmapSpec, MaterialSpec
-from photoshape_flow.vocab import SUBSTANCES
 
 log = logging.getLogger(__name__)
 
 GENERATOR_VERSION = "1"
-DemoSize = Literal["tiny", "small", "medium"]
-# First shapes cycle through the kinds so even tiny collections are varied.
-KIND_CYCLE: tuple[str, ...] = ("chair", "office_chair", "sofa", "stool", "armchair", "bench")
-
-
-@dataclass(frozen=True)
-class SizePreset:
-    shapes: int
-    heldout_shapes: int
-    per_substance: int
-    envmaps: int
-    heldout_envmaps: int
-    exemplars: int
-    exemplar_size: int
-    spp: int
-    texture_resolution: int = 512
-    envmap_width: int = 512
-
-
-SIZES: dict[str, SizePreset] = {
-    "tiny": SizePreset(
-        shapes=5,
-        heldout_shapes=2,
-        per_substance=2,
-        envmaps=3,
-        heldout_envmaps=2,
-        exemplars=6,
-        exemplar_size=144,
-        spp=24,
-        envmap_width=256,
-    ),
-    "small": SizePreset(
-        shapes=12,
-        heldout_shapes=4,
-        per_substance=3,
-        envmaps=4,
-        heldout_envmaps=2,
-        exemplars=20,
-        exemplar_size=256,
-        spp=48,
-    ),
-    "medium": SizePreset(
-        shapes=72,
-        heldout_shapes=16,
-        per_substance=6,
-        envmaps=26,  # + 4 held out = the paper's 30 studio envmaps (section 3.3)
-        heldout_envmaps=4,
-        exemplars=200,
-        exemplar_size=320,
-        spp=48,
-    ),
-}
-
-
 @dataclass(frozen=True)
 class DemoManifest:
     """What `generate_demo` wrote (absolute paths) and how long each stage took."""
@@ -124,145 +55,6 @@ class DemoManifest:
     groundtruth: Path
     rendered: int = 0  # exemplars rendered by this call (the rest were up to date)
     timings: dict[str, float] = field(default_factory=dict)
-
-
-# -- collections ----------------------------------------------------------------------------------
-
-
-def collection_shapes(seed: int, count: int) -> list[Furniture]:
-    """The shape collection: shape_0000.. (kinds cycle first, then follow KIND_WEIGHTS)."""
-    shapes = []
-    weights = np.asarray(KIND_WEIGHTS) / sum(KIND_WEIGHTS)
-    for k in range(count):
-        rng = child_rng(seed, "shape", k)
-        kind = KIND_CYCLE[k] if k < len(KIND_CYCLE) else KINDS[int(rng.choice(len(KINDS), p=weights))]
-        shapes.append(generate_furniture(rng, f"shape_{k:04d}", kind=kind))
-    return shapes
-
-
-def heldout_shapes(seed: int, count: int, collection: list[Furniture]) -> list[tuple[Furniture, str]]:
-    """Shapes only exemplars show: each a perturbed copy of a collection shape (returned with its id)."""
-    out = []
-    for k in range(count):
-        rng = child_rng(seed, "heldout-shape", k)
-        parent = collection[(k * 7 + int(rng.integers(len(collection)))) % len(collection)]
-        design = perturb_design(rng, parent.design)
-        out.append((generate_furniture(rng, f"heldout_{k:04d}", design=design), parent.source_id))
-    return out
-
-
-def _sha(data: bytes | str) -> str:
-    return hashlib.sha256(data.encode() if isinstance(data, str) else data).hexdigest()
-
-
-def _write_shape(folder: Path, furniture: Furniture) -> tuple[Path, str]:
-    stem = furniture.source_id
-    text = obj_text(furniture, f"{stem}.mtl")
-    write_text(folder / f"{stem}.mtl", mtl_text(furniture))
-    write_text(folder / f"{stem}.obj", text)
-    return folder / f"{stem}.obj", _sha(text)
-
-
-def _shape_entry(furniture: Furniture, path: str, in_collection: bool, similar_to: str | None) -> dict[str, Any]:
-    return {
-        "kind": furniture.kind,
-        "in_collection": in_collection,
-        "path": path,
-        "segmentation": furniture.segmentation,
-        "similar_to": similar_to,
-        "parts": [{"index": i, "name": p.name, "roles": p.roles} for i, p in enumerate(furniture.parts, start=1)],
-    }
-
-
-# -- exemplar planning ----------------------------------------------------------------------------
-
-
-def plan_exemplars(
-    seed: int,
-    preset: SizePreset,
-    collection: list[Furniture],
-    heldout: list[tuple[Furniture, str]],
-    recipes: list[MaterialRecipe],
-    studios: list[StudioSpec],
-) -> list[ExemplarPlan]:
-    """Which shape, materials, camera, light and degradation each exemplar gets.
-
-    Two in five exemplars show a held-out shape (retrieval can only find a similar one); the others
-    show a collection shape. Material assignments never repeat for the same shape.
-    """
-    by_substance: dict[str, list[MaterialRecipe]] = {s: [r for r in recipes if r.substance == s] for s in SUBSTANCES}
-    order = child_rng(seed, "exemplar-order").permutation(len(collection))
-    used: set[tuple] = set()
-    plans = []
-    n_coll = n_held = 0
-    for k in range(preset.exemplars):
-        rng = child_rng(seed, "exemplar", k)
-        if heldout and k % 5 in (1, 3):
-            furniture, similar_to = heldout[n_held % len(heldout)]
-            in_collection = False
-            n_held += 1
-        else:
-            furniture, similar_to = collection[int(order[n_coll % len(collection)])], None
-            in_collection = True
-            n_coll += 1
-        vertices = np.concatenate([c.piece.vertices for p in furniture.parts for c in p.components])
-        camera = sample_camera(rng, vertices)
-        for _ in range(50):
-            assignment = assign_materials(rng, furniture, by_substance)
-            key = (furniture.source_id, tuple(sorted((n, r.name) for n, r in assignment.items())))
-            if key not in used:
-                break
-        used.add(key)
-        studio = studios[int(rng.integers(len(studios)))]
-        plans.append(
-            ExemplarPlan(
-                stem=f"ex_{k:04d}",
-                shape_id=furniture.source_id,
-                in_collection=in_collection,
-                similar_to=similar_to,
-                camera=camera,
-                materials={n: r.name for n, r in assignment.items()},
-                substances={n: r.substance for n, r in assignment.items()},
-                envmap={
-                    "name": studio.name,
-                    "rotation": round(float(rng.uniform(0, 2 * math.pi)), 6),
-                    "scale": round(float(rng.uniform(0.9, 1.2)), 4),
-                },
-                degradation=sample_degradation(rng),
-                size=preset.exemplar_size,
-                spp=preset.spp,
-                render_seed=int(rng.integers(0, 2**31 - 1)),
-            )
-        )
-    return plans
-
-
-def _material_spec(folder: Path, recipe: MaterialRecipe):
-    maps = {ch: folder / f"{ch}.png" for ch in ("albedo", "roughness", "metallic", "normal")}
-    return MaterialSpec(name=recipe.name, substance=recipe.substance, maps=maps, scale=recipe.scale)
-
-
-def render_exemplar(
-    renderer: RendererProtocol,
-    furniture: Furniture,
-    plan: ExemplarPlan,
-    material_dirs: dict[str, Path],
-    recipes: dict[str, MaterialRecipe],
-    envmap_path: Path,
-) -> tuple[bytes, np.ndarray]:
-    """(JPEG bytes, part-index mask) of one planned exemplar."""
-    shape = furniture.to_shape_mesh()
-    camera = Camera.from_dict(plan.camera)
-    materials = [
-        _material_spec(material_dirs[plan.materials[p.name]], recipes[plan.materials[p.name]]) for p in shape.parts
-    ]
-    envmap = EnvmapSpec(envmap_path, scale=plan.envmap["scale"], rotation=plan.envmap["rotation"])
-    result = renderer.beauty(
-        shape, materials, camera, envmap, size=plan.size, spp=plan.spp, background="transparent", seed=plan.render_seed
-    )
-    image = degrade(result.hdr, result.alpha, plan.degradation)
-    mask = renderer.part_ids(shape, camera, size=plan.size)
-    return encode_jpeg(image, plan.degradation["jpeg_quality"]), mask
 
 
 # -- entry point ----------------------------------------------------------------------------------
@@ -307,14 +99,14 @@ def generate_demo(
     heldout = heldout_shapes(seed, preset.heldout_shapes, collection)
     shape_paths, shape_hash, shapes_json = [], {}, {}
     for f in collection:
-        path, digest = _write_shape(root / "shapes", f)
+        path, digest = write_shape(root / "shapes", f)
         shape_paths.append(path)
         shape_hash[f.source_id] = digest
-        shapes_json[f.source_id] = _shape_entry(f, f"shapes/{f.source_id}.obj", True, None)
+        shapes_json[f.source_id] = shape_entry(f, f"shapes/{f.source_id}.obj", True, None)
     for f, parent in heldout:
-        _, digest = _write_shape(root / "groundtruth" / "shapes", f)
+        _, digest = write_shape(root / "groundtruth" / "shapes", f)
         shape_hash[f.source_id] = digest
-        shapes_json[f.source_id] = _shape_entry(f, f"groundtruth/shapes/{f.source_id}.obj", False, parent)
+        shapes_json[f.source_id] = shape_entry(f, f"groundtruth/shapes/{f.source_id}.obj", False, parent)
     timings["shapes"] = time.perf_counter() - t0
 
     gt_path = root / "groundtruth.json"
@@ -370,7 +162,7 @@ def generate_demo(
     rendered = 0
     for plan in plans:
         furniture = furniture_by_id[plan.shape_id]
-        spec_hash = _sha(
+        spec_hash = sha256_hex(
             json.dumps(
                 {
                     "plan": asdict(plan),

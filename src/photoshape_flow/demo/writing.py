@@ -3,6 +3,7 @@ so re-running the demo generator with the same arguments touches nothing downstr
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
@@ -21,3 +22,8 @@ def write_bytes(path: Path, data: bytes) -> bool:
 
 def write_text(path: Path, text: str) -> bool:
     return write_bytes(path, text.encode("utf-8"))
+
+
+def sha256_hex(data: bytes | str) -> str:
+    """The hex sha256 of `data` (text as UTF-8): what the generator stamps its outputs with."""
+    return hashlib.sha256(data.encode() if isinstance(data, str) else data).hexdigest()

@@ -7,13 +7,11 @@ requests that tried to leave the machine (aborted), every image with its natural
 
 from __future__ import annotations
 
-import json
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.export.node_tools import chromium_executable, require_package, run_script
+from photoshape_flow.export.node_tools import chromium_executable, require_package, run_script_with_config
 
 
 def check_pages(
@@ -37,13 +35,7 @@ def check_pages(
         "evaluate": list(evaluate),
         "screenshot_selector": screenshot_selector,
     }
-    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as handle:
-        json.dump(config, handle)
-        config_path = Path(handle.name)
-    try:
-        return run_script("check_pages.mjs", str(config_path), timeout=timeout)
-    finally:
-        config_path.unlink(missing_ok=True)
+    return run_script_with_config("check_pages.mjs", config, timeout=timeout)
 
 
 def problems(report: dict[str, Any]) -> list[str]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -66,3 +67,15 @@ def run_script(script: str, *args: str, timeout: float = 120.0) -> dict[str, Any
         return json.loads(proc.stdout)
     except json.JSONDecodeError as exc:
         raise RuntimeError(f"{script}: output is not JSON ({exc})") from exc
+
+
+def run_script_with_config(script: str, config: dict[str, Any], timeout: float = 120.0) -> dict[str, Any]:
+    """`run_script` with `config` passed as the path of a temporary JSON file (too large and nested
+    for arguments), removed afterwards."""
+    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as handle:
+        json.dump(config, handle)
+        config_path = Path(handle.name)
+    try:
+        return run_script(script, str(config_path), timeout=timeout)
+    finally:
+        config_path.unlink(missing_ok=True)

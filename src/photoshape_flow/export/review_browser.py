@@ -11,12 +11,10 @@ shows them; `scripts/review-screenshots.sh` makes them from the tiny demo).
 
 from __future__ import annotations
 
-import json
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from photoshape_flow.export.node_tools import chromium_executable, require_package, run_script
+from photoshape_flow.export.node_tools import chromium_executable, require_package, run_script_with_config
 from photoshape_flow.export.review_server import GRADE_KEYS
 
 SCREENSHOTS: tuple[str, ...] = ("review-1-turned.png", "review-2-enlarged.png", "review-3-graded.png",
@@ -34,10 +32,4 @@ def review_flow(url: str, *, label: str = "good", pair: int | None = None, scree
     }
     if screenshots:
         Path(screenshots).mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as handle:
-        json.dump(config, handle)
-        config_path = Path(handle.name)
-    try:
-        return run_script("review_flow.mjs", str(config_path), timeout=timeout)
-    finally:
-        config_path.unlink(missing_ok=True)
+    return run_script_with_config("review_flow.mjs", config, timeout=timeout)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import logging
-from collections.abc import Callable, Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -159,6 +159,14 @@ class IngestLimits:
             max_faces=int(settings.ingest_max_faces),
             max_image_pixels=int(settings.ingest_max_image_megapixels * 1_000_000),
         )
+
+
+def existing_row(url: str, columns: Sequence[Any], *where: Any) -> dict[str, Any] | None:
+    """`columns` of the row an item would replace (None: a new item), read in a session of its own: what
+    the skip / replace decision and the summary's "added" or "replaced" compare against."""
+    with session_scope(url) as session:
+        row = session.execute(sa.select(*columns).where(*where)).first()
+    return dict(row._mapping) if row is not None else None
 
 
 def files_hash(paths: Iterable[Path], base: Path | None = None) -> str:

@@ -29,6 +29,7 @@ from photoshape_flow.ingest.common import (
     IngestLimits,
     IngestSummary,
     Progress,
+    existing_row,
     guard_item,
     hash_fraction,
     one_line,
@@ -51,12 +52,8 @@ def envmap_split(name: str) -> str:
 
 
 def _existing(url: str, name: str) -> dict[str, Any] | None:
-    with session_scope(url) as session:
-        row = session.execute(
-            sa.select(m.Envmap.id, m.Envmap.sha256, m.Envmap.status, m.Envmap.error, m.Envmap.split, m.Envmap.meta)
-            .where(m.Envmap.name == name)
-        ).first()
-    return dict(row._mapping) if row is not None else None
+    return existing_row(url, (m.Envmap.id, m.Envmap.sha256, m.Envmap.status, m.Envmap.error, m.Envmap.split,
+                              m.Envmap.meta), m.Envmap.name == name)
 
 
 def balance_envmap_splits(url: str) -> list[tuple[str, str]]:

@@ -37,6 +37,7 @@ from photoshape_flow.ingest.common import (
     IngestSummary,
     Progress,
     adopt_renamed_row,
+    existing_row,
     guard_item,
     one_line,
     resolve_settings,
@@ -64,12 +65,8 @@ class _Ready:
 
 
 def _existing(url: str, source: str, source_id: str) -> dict[str, Any] | None:
-    with session_scope(url) as session:
-        row = session.execute(
-            sa.select(m.Exemplar.id, m.Exemplar.sha256, m.Exemplar.params_hash, m.Exemplar.status, m.Exemplar.error)
-            .where(m.Exemplar.source == source, m.Exemplar.source_id == source_id)
-        ).first()
-    return dict(row._mapping) if row is not None else None
+    return existing_row(url, (m.Exemplar.id, m.Exemplar.sha256, m.Exemplar.params_hash, m.Exemplar.status,
+                              m.Exemplar.error), m.Exemplar.source == source, m.Exemplar.source_id == source_id)
 
 
 def delete_exemplar_dependents(session: Session, exemplar_id: int) -> None:

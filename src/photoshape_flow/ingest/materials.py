@@ -42,6 +42,7 @@ from photoshape_flow.ingest.common import (
     IngestLimits,
     IngestSummary,
     Progress,
+    existing_row,
     files_hash,
     guard_item,
     one_line,
@@ -96,12 +97,8 @@ def discover_material_folders(paths: Iterable[str | Path]) -> list[tuple[Path, s
 
 
 def _existing(url: str, name: str) -> dict[str, Any] | None:
-    with session_scope(url) as session:
-        row = session.execute(
-            sa.select(m.Material.id, m.Material.sha256, m.Material.params_hash, m.Material.status, m.Material.error)
-            .where(m.Material.name == name)
-        ).first()
-    return dict(row._mapping) if row is not None else None
+    return existing_row(url, (m.Material.id, m.Material.sha256, m.Material.params_hash, m.Material.status,
+                              m.Material.error), m.Material.name == name)
 
 
 _record_failure = FailureWriter(

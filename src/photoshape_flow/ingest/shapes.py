@@ -43,6 +43,7 @@ from photoshape_flow.ingest.common import (
     IngestSummary,
     Progress,
     adopt_renamed_row,
+    existing_row,
     guard_item,
     one_line,
     rejection_reason,
@@ -58,12 +59,8 @@ logger = logging.getLogger(__name__)
 
 
 def _existing(url: str, source: str, source_id: str) -> dict[str, Any] | None:
-    with session_scope(url) as session:
-        row = session.execute(
-            sa.select(m.Shape.id, m.Shape.sha256, m.Shape.params_hash, m.Shape.status, m.Shape.error, m.Shape.split)
-            .where(m.Shape.source == source, m.Shape.source_id == source_id)
-        ).first()
-    return dict(row._mapping) if row is not None else None
+    return existing_row(url, (m.Shape.id, m.Shape.sha256, m.Shape.params_hash, m.Shape.status, m.Shape.error,
+                              m.Shape.split), m.Shape.source == source, m.Shape.source_id == source_id)
 
 
 def delete_shape_dependents(session: Session, shape_id: int) -> None:

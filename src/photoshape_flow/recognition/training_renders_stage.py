@@ -15,7 +15,8 @@ from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import TrainingRendersConfig
-from photoshape_flow.recognition.training_renders import load_pools, run_training_renders
+from photoshape_flow.recognition.render_pools import load_pools
+from photoshape_flow.recognition.training_renders import run_training_renders
 from photoshape_flow.synth.spec import ENV_SCALE_RANGE
 
 NAME = "training-renders"

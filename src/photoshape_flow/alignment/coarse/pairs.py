@@ -20,7 +20,8 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.align.retrieval import Matches, ShardListDatabase, invert, merge_matches, search
+from photoshape_flow.align.index import Matches, ShardListDatabase, invert, merge_matches
+from photoshape_flow.align.retrieval import search
 from photoshape_flow.alignment.coarse.config import CoarseConfig
 from photoshape_flow.alignment.coarse.reverse_index import (
     StoredList,

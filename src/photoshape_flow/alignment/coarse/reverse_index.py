@@ -19,7 +19,7 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.align.retrieval import Matches
+from photoshape_flow.align.index import Matches
 from photoshape_flow.alignment.coarse.config import CoarseConfig
 from photoshape_flow.alignment.coarse.viewpoint_sets import cameras_hash, config_viewpoint_set
 from photoshape_flow.db import models as m
