@@ -11,6 +11,7 @@ claim and its first result, after a checkpoint, in the middle of an export or a 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 
@@ -53,4 +54,9 @@ def fault_point(name: str) -> None:
             out.flush()
             os.fsync(out.fileno())
     interrupt = os.environ.get("PHOTOSHAPE_FAULT_SIGNAL", "KILL").upper() == "INT"
+    if interrupt:
+        # a process started in the background by a non-interactive shell inherits SIGINT ignored, and
+        # Python then never installs its Ctrl-C handler: restore it so the harness's Ctrl-C lands
+        with contextlib.suppress(ValueError):  # not the main thread: the disposition stays as it is
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     os.kill(os.getpid(), signal.SIGINT if interrupt else signal.SIGKILL)

@@ -81,6 +81,8 @@ def _serve(out: Path, method: str, host: str, port: int, grader: str) -> None:
     if not is_loopback(server.host):
         console.print(f"warning: bound to {host}: anyone who can reach this address can grade (no login)")
     previous = signal.signal(signal.SIGTERM, _stop)
+    # Ctrl-C must stop it even when a non-interactive shell started it in the background with SIGINT ignored
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         server.serve_forever()
     except KeyboardInterrupt:
@@ -88,6 +90,7 @@ def _serve(out: Path, method: str, host: str, port: int, grader: str) -> None:
     finally:
         server.server_close()
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
     if server.graded:
         site = write_gallery_site(out, method)
         console.print(f"stopped: {server.graded} grade(s) written; {site.index} rewritten with them",
