@@ -12,18 +12,23 @@ unique with pair and grader.
 Backfill: each existing grade gets the method of its pair's newest published exemplar-view render
 (``rendering`` kind ``photoshape``, status ok) and that method's current assignment-set key; a pair
 never published, or whose method has no rank-1 rows any more, keeps NULL keys (a legacy grade:
-queryable, shown on no PhotoShape). The key is computed by the application's own function, so it
-matches what `photoshape grade` and the gallery compute. Downgrade: drops the columns and keeps
+queryable, shown on no PhotoShape). The key is computed as the application's function computes it, so it
+matches what `photoshape grade` and the gallery compute at this revision: the function is
+frozen here (`_assignment_set_keys`, raw SQL, no refinement column yet) so that later changes to the
+application cannot change what this migration writes; tests/db/test_migrations.py checks it equals
+the application's `publish.photoshapes.assignment_set_keys`. Downgrade: drops the columns and keeps
 one grade per (pair, grader), the newest (highest id), as the old unique key requires.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Sequence
+from typing import Any
 
 import sqlalchemy as sa
 from alembic import op
-from sqlalchemy.orm import Session
 
 revision: str = '5c1e7b2d9f40'
 down_revision: str | None = '90238d22ce60'
@@ -31,9 +36,26 @@ branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
 
-def _backfill(conn: sa.Connection) -> None:
-    from photoshape_flow.publish.photoshapes import assignment_set_keys
+def _assignment_set_keys(conn: sa.Connection, wanted: set[tuple[int, str]]) -> dict[tuple[int, str], str]:
+    """(pair_id, method_key) -> sha256 of the sorted-key JSON of its rank-1 rows, as the application
+    computed it at this revision (no refinement column existed)."""
+    rows: dict[tuple[int, str], list[list[Any]]] = {}
+    if not wanted:
+        return {}
+    result = conn.execute(sa.text(
+        "SELECT pair_id, method_key, part_id, material_id, substance, classifier_id, params FROM assignment "
+        "WHERE rank = 1 ORDER BY pair_id, method_key, part_id"))
+    for pair_id, method_key, part_id, material_id, substance, classifier_id, params in result:
+        if (pair_id, method_key) in wanted:
+            params = json.loads(params) if isinstance(params, str) else params
+            rows.setdefault((pair_id, method_key), []).append(
+                [part_id, material_id, substance, classifier_id, (params or {}).get("uv")])
+    return {key: hashlib.sha256(json.dumps({"method_key": key[1], "parts": parts}, sort_keys=True,
+                                           default=str).encode()).hexdigest()
+            for key, parts in rows.items()}
 
+
+def _backfill(conn: sa.Connection) -> None:
     grades = conn.execute(sa.text("SELECT id, pair_id FROM grade")).all()
     published: dict[int, str] = {}
     for pair_id in sorted({p for _, p in grades}):
@@ -42,8 +64,7 @@ def _backfill(conn: sa.Connection) -> None:
             "AND key LIKE '%/exemplar' ORDER BY id DESC LIMIT 1"), {"p": pair_id}).scalar()
         if key and key.count("/") >= 2:
             published[pair_id] = key.split("/", 1)[1].rsplit("/", 1)[0]
-    with Session(bind=conn) as session:
-        keys = assignment_set_keys(session, list(published.items()), with_refinement=False)
+    keys = _assignment_set_keys(conn, set(published.items()))
     for grade_id, pair_id in grades:
         method_key = published.get(pair_id)
         set_key = keys.get((pair_id, method_key)) if method_key else None

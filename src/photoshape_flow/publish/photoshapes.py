@@ -88,14 +88,12 @@ def candidate_method_keys(session: Session, method: str | None, pair_ids: Sequen
     return [(pair_id, key) for pair_id, (_, key) in sorted(best.items())]
 
 
-def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]], *,
-                        with_refinement: bool = True) -> dict[tuple[int, str], str]:
+def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]]) -> dict[tuple[int, str], str]:
     """(pair_id, method_key) -> a stable key of the rank-1 assignment set it names.
 
     The key changes whenever what a PhotoShape shows changes (another classifier, material, substance or
     UV transform on any part), so "already published" and a grade can be keyed by what was shown rather
-    than by the pair alone. Pairs without rank-1 rows are absent. `with_refinement=False` is for a
-    migration older than the `assignment.refinement` column (no row was refined then).
+    than by the pair alone. Pairs without rank-1 rows are absent.
     """
     wanted = set(pairs)
     if not wanted:
@@ -106,7 +104,7 @@ def assignment_set_keys(session: Session, pairs: Sequence[tuple[int, str]], *,
             sa.select(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.refinement)
             .where(m.Assignment.rank == 1, m.Assignment.refinement.is_not(None),
                    m.Assignment.pair_id.in_(sorted({p for p, _ in wanted}))))
-    } if with_refinement else {}
+    }
     query = (
         sa.select(m.Assignment.pair_id, m.Assignment.method_key, m.Assignment.part_id, m.Assignment.material_id,
                   m.Assignment.substance, m.Assignment.classifier_id, m.Assignment.params)
