@@ -5,7 +5,10 @@ resumed PostgreSQL run leaves must equal an embedded one's too): no duplicate ro
 no claims left, the same results.
 
 Each killed run dies at its point (exit -9 and the point's name in the mark file) and the next run
-resumes from what it left, so one data root passes every point in pipeline order. Tolerances: rows
+resumes from what it left, so one data root passes every point in pipeline order. On SQLite one point
+is Ctrl-C (SIGINT) instead, and the real `photoshape status` is read after the training kill and at the
+end: an interrupted run leaves nothing transient (no claim `claimed`, no classifier `training`) that a
+later successful run would still report. Tolerances: rows
 are compared on their natural keys and values; blob refs (content hashes of maps, renders and
 features) must be equal, except rendered images, whose pixels may differ by at most 1/255 on average
 (the renderer is seeded from each item's key), and classifier metrics (1e-6). Torch runs on one
@@ -14,14 +17,17 @@ thread. bench/kill_points.py runs every point count separately.
 
 from __future__ import annotations
 
+import re
 import signal
+import subprocess
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import sqlalchemy as sa
 from tests.conftest import data_root_with_inbox
-from tests.pipeline.whole_runs import run_all, snapshot
+from tests.pipeline.whole_runs import PHOTOSHAPE, run_all, run_env, snapshot
 
 from photoshape_flow.store import BlobStore
 
@@ -30,7 +36,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.render]
 # (point, hit count) in pipeline order: SQLite passes all of them, PostgreSQL the first of each kind
 SQLITE_POINTS = [
     ("ingest-blob-before-row", 2),
-    ("claimed-before-result", 1),
+    ("claimed-before-result", 1),  # Ctrl-C on SQLite (INTERRUPTED)
     ("rendering-blobs-before-row", 3),
     ("substance-checkpoint-saved", 1),
     ("training-checkpoint-saved", 1),
@@ -40,16 +46,51 @@ SQLITE_POINTS = [
 ]
 POSTGRES_POINTS = [("ingest-blob-before-row", 1), ("rendering-blobs-before-row", 2),
                    ("training-checkpoint-saved", 1), ("export-writing", 1)]
+INTERRUPTED = "claimed-before-result"  # SQLite's Ctrl-C point: right after a batch's items were claimed
 
 
-def _die_at(data_root: Path, url: str | None, point: str, hit: int) -> None:
-    """A run that must die at `point` (its `hit`-th pass): exit -9 and the point named in the mark file."""
+def _die_at(data_root: Path, url: str | None, point: str, hit: int, how: str = "KILL") -> None:
+    """A run that must stop at `point` (its `hit`-th pass) and name it in the mark file: exit -9 when
+    killed, 130 (what Ctrl-C makes a typer command exit with) when interrupted."""
     mark = data_root.parent / f"{data_root.name}-mark.txt"
     mark.unlink(missing_ok=True)
-    out = run_all(data_root, url, PHOTOSHAPE_FAULT=f"{point}:{hit}", PHOTOSHAPE_FAULT_MARK=str(mark))
+    out = run_all(data_root, url, PHOTOSHAPE_FAULT=f"{point}:{hit}", PHOTOSHAPE_FAULT_MARK=str(mark),
+                  PHOTOSHAPE_FAULT_SIGNAL=how)
     died = mark.read_text().split() if mark.exists() else []
-    assert out.returncode == -signal.SIGKILL and died == [point], (point, out.returncode, died,
-                                                                 out.stdout[-1500:] + out.stderr[-1500:])
+    code = -signal.SIGKILL if how == "KILL" else 130
+    assert out.returncode == code and died == [point], (point, out.returncode, died,
+                                                       out.stdout[-1500:] + out.stderr[-1500:])
+
+
+def _rows(url: str, query: str) -> list[tuple]:
+    engine = sa.create_engine(url)
+    with engine.connect() as conn:
+        rows = [tuple(r) for r in conn.execute(sa.text(query))]
+    engine.dispose()
+    return rows
+
+
+def _training_status(root: Path) -> tuple[int, int, int]:
+    """(done, pending, failed) of the training row of the real `photoshape status`."""
+    out = subprocess.run([PHOTOSHAPE, "status"], env=run_env(root, None), capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    line = next(line for line in out.stdout.splitlines() if re.match(r"[│┃] training ", line))
+    stage, unit, done, pending, failed, rejected = [c.strip() for c in re.split(r"[│┃]", line) if c.strip()]
+    return int(done), int(pending), int(failed)
+
+
+def _after(point: str, root: Path, url: str) -> None:
+    """What an interrupted run must leave (SQLite): nothing transient that later runs would report."""
+    if point == INTERRUPTED:  # Ctrl-C: its claims go back, the run is recorded as failed
+        assert _rows(url, "SELECT stage, item_key FROM work_claim WHERE state = 'claimed'") == []
+        assert _rows(url, "SELECT status FROM pipeline_run ORDER BY id DESC LIMIT 1") == [("failed",)]
+    if point == "training-checkpoint-saved":  # killed outright: its classifier row said `training` for good
+        assert _rows(url, "SELECT status FROM classifier WHERE status = 'training'") == [("training",)]
+        _, pending, failed = _training_status(root)  # nobody trains that row any more: failed, not pending
+        assert (pending, failed) == (0, 1)
+        assert _rows(url, "SELECT status FROM classifier WHERE status = 'training'") == []
+        assert _rows(url, "SELECT status FROM pipeline_run ORDER BY id DESC LIMIT 1") == [("died",)]
 
 
 def _assert_same_images(a: Path, b: Path, refs_a: dict, refs_b: dict) -> None:
@@ -70,8 +111,6 @@ def _url(backend: str, root: Path, request: pytest.FixtureRequest, name: str) ->
     if backend == "sqlite":
         return None
     import uuid
-
-    import sqlalchemy as sa
 
     admin_url = request.getfixturevalue("pg_admin_url")
     db = f"photoshape_kill_{name}_{uuid.uuid4().hex[:8]}"
@@ -95,12 +134,18 @@ def test_runs_killed_at_each_point_resume_to_the_same_rows(backend: str, tiny_de
     points = SQLITE_POINTS if backend == "sqlite" else POSTGRES_POINTS
     resumed = data_root_with_inbox(tmp_path / "resumed", tiny_demo)
     url = _url(backend, resumed, request, "resumed")
+    sqlite = f"sqlite:///{resumed / 'photoshape.db'}"
     for point, hit in points:
-        _die_at(resumed, url, point, hit)
+        _die_at(resumed, url, point, hit, "INT" if backend == "sqlite" and point == INTERRUPTED else "KILL")
+        if backend == "sqlite":
+            _after(point, resumed, sqlite)
     final = run_all(resumed, url)  # the documented command: run it again
     assert final.returncode == 0, final.stdout[-3000:] + final.stderr[-3000:]
+    if backend == "sqlite":  # the later successful run reports nothing pending or failed for training
+        done, pending, failed = _training_status(resumed)
+        assert (pending, failed) == (0, 0) and done >= 1
 
-    (reference_root, want), got = reference, snapshot(url or f"sqlite:///{resumed / 'photoshape.db'}")
+    (reference_root, want), got = reference, snapshot(url or sqlite)
     assert got["claims_left"] == [] and want["claims_left"] == []
     for table in ("shape", "part", "exemplar", "material", "envmap", "view_feature", "pair", "alignment",
                   "part_substance", "rendering", "classifier", "assignment"):

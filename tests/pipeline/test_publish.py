@@ -357,8 +357,9 @@ def test_grade_belongs_to_the_photoshape_it_was_given_to(db_url, store, tmp_path
 
 @pytest.mark.render
 def test_gallery_opens_on_published_photoshapes_and_publishes_on_demand(db_url, store, tmp_path):
-    """index.html lists rendered PhotoShapes; the others wait on candidates.html with the command that
-    renders them, and `photoshape run publish --pair N` (whatever the pair's rank) does."""
+    """index.html lists rendered PhotoShapes; the others wait on candidates.html, photo beside a built-in
+    render, with the command that renders them, and `photoshape run publish --pair N` (whatever the
+    pair's rank) does."""
     from typer.testing import CliRunner
 
     from photoshape_flow.cli import app
@@ -376,6 +377,13 @@ def test_gallery_opens_on_published_photoshapes_and_publishes_on_demand(db_url, 
     index, candidates = (site / "index.html").read_text(), (site / "candidates.html").read_text()
     assert f'data-pair="{good}"' not in index and "No published PhotoShapes yet" in index
     assert f"photoshape run publish --pair {good}" in candidates
+    # a waiting candidate still shows its shape beside the photo: a built-in render at thumbnail size
+    waiting = _renderings(db_url)[("builtin", f"{good}/exemplar")]
+    assert waiting.status == "ok" and waiting.params["size"] == 128
+    assert f'alt="built-in materials {good}"' in candidates
+    again = runner.invoke(app, ["run", "publish", *small])  # up to date: not rendered again
+    assert again.exit_code == 0 and _renderings(db_url)[("builtin", f"{good}/exemplar")].updated_at == \
+        waiting.updated_at
 
     result = runner.invoke(app, ["run", "publish", "--pair", str(good), "--pair", "999", *small])
     assert result.exit_code == 0, result.output

@@ -222,7 +222,7 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
             "uv": jitter.to_dict() if jitter is not None else None,
             **({"refinement": refinement} if refinement is not None else {}),
         })
-    camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
+    camera = pair_camera(pair)
     lighting = envmap_spec(envmap, store) if envmap is not None else None
     document = assignment_document(
         pair_id=pair_id, method_key=method_key,
@@ -243,6 +243,11 @@ def load_photoshape(session: Session, store: BlobStore, pair_id: int, method_key
         envmap_id=envmap.id if envmap is not None else None, exemplar_blob=exemplar.image_blob,
         material_rows=material_rows, unrefined=unrefined if unrefined != materials else None,
     )
+
+
+def pair_camera(pair: m.Pair) -> Camera:
+    """The exemplar's view: the camera coarse alignment matched the pair with."""
+    return Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
 
 
 def framed_views(mesh: Any, camera: Any, views: int) -> list[tuple[str, Any]]:

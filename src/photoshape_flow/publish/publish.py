@@ -8,8 +8,8 @@ which envmap lights it) this stage:
    azimuths from the front (`views_of`, the same framing for every shape), recorded as Rendering rows
    ``kind="photoshape"``, ``key=f"{pair_id}/{method_key}/{view}"`` (views ``exemplar``,
    ``turntable-00`` ...), images ``srgb`` and ``alpha``;
-2. renders the shape with its built-in materials at the exemplar's view (``kind="builtin"``,
-   ``key=f"{pair_id}/exemplar"``), the baseline the gallery shows beside it;
+2. renders the shape with its built-in materials at the exemplar's view (`publish.builtin_renders`),
+   the baseline the gallery shows beside it;
 3. exports the downloads (the chosen `export.formats`, the Mitsuba XML with the exemplar-view render's
    framed camera, film, spp and seed, so it renders that image again (`photoshapes.exemplar_render`), and
    `assignment.json`; see `export.bundle`) into ``<data_root>/exports/<method_key>/<pair_id>/``
@@ -31,7 +31,6 @@ from __future__ import annotations
 import datetime as dt
 import json
 import logging
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -48,6 +47,7 @@ from photoshape_flow.hashing import stable_hash
 from photoshape_flow.pipeline.renderings import record_rendering
 from photoshape_flow.profiles import DEFAULT_PUBLISH_METHOD, writing_stage
 from photoshape_flow.progress_sink import Progress, counted
+from photoshape_flow.publish.builtin_renders import Lighting, render_builtin
 from photoshape_flow.publish.downloads import export_dir, export_manifest
 from photoshape_flow.publish.photoshapes import (
     UNREFINED_VIEW,
@@ -61,7 +61,7 @@ from photoshape_flow.publish.photoshapes import (
     render_key,
     render_seed,
 )
-from photoshape_flow.render.factory import default_renderer
+from photoshape_flow.publish.rendering import LazyRenderer, render_and_record
 from photoshape_flow.render.protocol import RendererProtocol
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
@@ -120,6 +120,7 @@ def run_publish(
     url = settings.resolved_database_url
     store = store if store is not None else default_store(settings)
     summary = PublishSummary(method=method or DEFAULT_PUBLISH_METHOD)
+    lazy = LazyRenderer(store, renderer)
     with session_scope(url) as session:
         todo = candidate_method_keys(session, method, pair_ids)
         shown = assignment_set_keys(session, todo)
@@ -155,52 +156,31 @@ def run_publish(
                                  status=STATUS_FAILED, error=message[:2000])
             continue
         framed = framed_views(item.mesh, item.camera, views)
-        jobs = [("photoshape", render_key(pair_id, method_key, view), camera, item.materials, item.uv_transforms)
-                for view, camera in framed]
-        jobs.append(("builtin", f"{pair_id}/exemplar", framed[0][1], [None] * len(item.mesh.parts), None))
+        jobs = [(render_key(pair_id, method_key, view), camera, item.materials) for view, camera in framed]
         if item.unrefined is not None:  # the gallery's before/after of the refinement (`fit.refine`)
-            jobs.append(("photoshape", render_key(pair_id, method_key, UNREFINED_VIEW), framed[0][1], item.unrefined,
-                         item.uv_transforms))
+            jobs.append((render_key(pair_id, method_key, UNREFINED_VIEW), framed[0][1], item.unrefined))
         with session_scope(url) as session:
-            existing = {kind: _existing(session, kind, [k for kd, k, *_ in jobs if kd == kind])
-                        for kind in ("photoshape", "builtin")}
-        for kind, key, camera, materials, jitters in jobs:
-            seed = render_seed(settings.seed, kind, key)
-            fingerprint = dict(item.fingerprint)
-            if kind == "builtin":
-                fingerprint["parts"] = [{"part": p.index, "builtin": p.builtin_material} for p in item.mesh.parts]
+            existing = _existing(session, "photoshape", [key for key, *_ in jobs])
+        for key, camera, materials in jobs:
+            seed = render_seed(settings.seed, "photoshape", key)
             params = {"camera": camera.to_dict(), "size": size, "spp": spp, "floor": floor, "seed": seed,
                       "method_key": method_key, "envmap": summary.envmap, "background": "white"}
-            params_hash = stable_hash({**fingerprint, **params})
-            if kind == "photoshape":  # what the render shows, for the gallery and grades (not hashed: implied)
-                params = {**params, "assignment_set": shown.get((pair_id, method_key))}
-            if existing[kind].get(key) == (params_hash, STATUS_OK):
+            params_hash = stable_hash({**item.fingerprint, **params, "envmap_blob": item.fingerprint["envmap"]})
+            if existing.get(key) == (params_hash, STATUS_OK):
                 summary.skipped += 1
                 continue
-            if renderer is None:
-                renderer = default_renderer(store)
-            started = time.perf_counter()
-            common = {"kind": kind, "key": key, "params": params, "shape_id": item.shape_id, "pair_id": pair_id,
-                      "envmap_id": item.envmap_id, "params_hash": params_hash,
-                      "classifier_id": item.classifier_id if kind == "photoshape" else None}
-            try:
-                result = renderer.beauty(item.mesh, materials, camera, item.envmap, size=size, spp=spp,
-                                         uv_transforms=jitters, background="white", floor=floor, seed=seed)
-            except Exception as exc:
-                summary.failed += 1
-                message = f"{kind} {key}: {type(exc).__name__}: {exc}"
-                fail(message)
-                with session_scope(url) as session:
-                    record_rendering(session, store, images={}, status=STATUS_FAILED, error=message[:2000],
-                                     **common)
-                continue
-            seconds = time.perf_counter() - started
-            summary.render_seconds += seconds
-            alpha = (result.alpha.clip(0.0, 1.0) * 255.0 + 0.5).astype("uint8")
-            with session_scope(url) as session:
-                record_rendering(session, store, images={"srgb": result.srgb, "alpha": alpha}, seconds=seconds,
-                                 saturated_fraction=result.saturated_fraction, **common)
-            summary.rendered += 1
+            # what the render shows, for the gallery and grades (not hashed: implied by the fingerprint)
+            params = {**params, "assignment_set": shown.get((pair_id, method_key))}
+            render_and_record(url, store, lazy, summary, fail, mesh=item.mesh, materials=materials, camera=camera,
+                              envmap=item.envmap, jitters=item.uv_transforms, size=size, spp=spp, floor=floor,
+                              seed=seed, row={"kind": "photoshape", "key": key, "params": params,
+                                              "shape_id": item.shape_id, "pair_id": pair_id,
+                                              "envmap_id": item.envmap_id, "params_hash": params_hash,
+                                              "classifier_id": item.classifier_id})
+        render_builtin(url, store, lazy, summary, fail, seed=settings.seed, pair_id=pair_id, shape_id=item.shape_id,
+                       mesh=item.mesh, mesh_blob=item.fingerprint["mesh"], camera=item.camera, size=size, spp=spp,
+                       floor=floor, lighting=Lighting(summary.envmap, item.fingerprint["envmap"], item.envmap_id,
+                                                      item.envmap))
         if export:
             _export(item, formats, settings, store, size, spp, summary, fail, export_photoshape)
     log.info("publish %s: %d candidates, %d rendered, %d skipped, %d failed, %d exported (%d skipped, %d failed)",

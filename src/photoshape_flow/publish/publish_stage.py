@@ -11,6 +11,7 @@ from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport
 from photoshape_flow.pipeline.work import WorkUnit
 from photoshape_flow.profiles import PublishConfig
+from photoshape_flow.publish.builtin_renders import run_builtin_renders
 from photoshape_flow.publish.gallery_site import write_gallery_site
 from photoshape_flow.publish.photoshapes import assignment_set_keys, candidate_method_keys
 from photoshape_flow.publish.publish import run_publish
@@ -56,7 +57,17 @@ def run(ctx: StageContext, cfg: PublishConfig, work: WorkUnit | None = None) -> 
 
 
 def finish(ctx: StageContext, cfg: PublishConfig) -> StageReport:
-    """The gallery site over everything published so far with `publish.method`."""
+    """The built-in render of every candidate publish leaves waiting (beyond `max_rank`, at thumbnail
+    quality: the candidates page shows photo and shape side by side), then the gallery site over
+    everything published so far with `publish.method`."""
+    with ctx.session() as session:
+        planned = set(plan(ctx, cfg)[0].ids)
+        waiting = [pair_id for pair_id, _ in candidate_method_keys(session, cfg.method) if pair_id not in planned]
+    builtins = run_builtin_renders(waiting, ctx.settings, renderer=ctx.renderer, progress=ctx.progress,
+                                   store=ctx.store)
     site = write_gallery_site(gallery_dir(ctx), cfg.method, ctx.settings, progress=ctx.progress, store=ctx.store)
-    return StageReport(NAME, details={"gallery": str(site.index), "gallery_published": site.published,
-                                      "gallery_waiting": site.waiting, "method": cfg.method})
+    return StageReport(NAME, done=builtins.rendered, skipped=builtins.skipped, failed=builtins.failed,
+                       details={"gallery": str(site.index), "gallery_published": site.published,
+                                "gallery_waiting": site.waiting, "method": cfg.method,
+                                "builtin_renders": {"rendered": builtins.rendered, "skipped": builtins.skipped,
+                                                    "failed": builtins.failed, "errors": builtins.errors}})
