@@ -2,6 +2,8 @@
 VENV ?= .venv
 SIZE ?= small
 PYTEST_ARGS ?=
+# pytest-xdist workers: two on the two-core CI machine (0: one process, e.g. to debug a test)
+TEST_WORKERS ?= 2
 WORLD ?= ../second-world
 WORLD_SEED ?= 0
 
@@ -15,7 +17,7 @@ demo: setup
 
 test: setup
 	$(VENV)/bin/ruff check .
-	$(VENV)/bin/pytest --durations=15 $(PYTEST_ARGS)
+	$(VENV)/bin/pytest -n $(TEST_WORKERS) --dist loadgroup --durations=15 $(PYTEST_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .
