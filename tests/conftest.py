@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import os
+import pickle
 import shutil
 import socket
 import subprocess
 import tempfile
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -168,27 +169,56 @@ def any_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
 # --- demo collections --------------------------------------------------------------------------
 
 
+def once_per_session(tmp_path_factory: pytest.TempPathFactory, name: str, build: Callable[[Path], Any]) -> Any:
+    """`build(folder)` run once per test session, however many pytest-xdist workers share it.
+
+    Workers' temp folders sit in one session folder; the first worker to take the lock builds in
+    ``<session>/shared-<name>`` and pickles the result, later ones (waiting on the lock) read it. So
+    every worker reads the same files, as one process would, and the reference run (over a minute)
+    is not repeated per worker.
+    """
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent
+    folder, result = base / f"shared-{name}", base / f"shared-{name}.pickle"
+    with FileLock(str(base / f"shared-{name}.lock")):
+        if result.exists():
+            return pickle.loads(result.read_bytes())
+        shutil.rmtree(folder, ignore_errors=True)  # a build that failed in another worker
+        folder.mkdir()
+        built = build(folder)
+        result.write_bytes(pickle.dumps(built))
+        return built
+
+
 @pytest.fixture(scope="session")
 def tiny_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The tiny demo collections (generated once per test session)."""
     from photoshape_flow.demo import generate_demo
 
-    root = tmp_path_factory.mktemp("tiny-demo")
-    generate_demo(root, "tiny", seed=3)
-    return root
+    def build(folder: Path) -> Path:
+        generate_demo(folder, "tiny", seed=3)
+        return folder
+
+    return once_per_session(tmp_path_factory, "tiny-demo", build)
 
 
 @pytest.fixture(scope="session")
 def reference(tiny_demo: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
     """One uninterrupted `photoshape run all --profile tiny` on SQLite, as a user starts it (its data root
     and `snapshot`): what every resumed or concurrent run reproduces, and the built collection that the
-    service tests copy (`copied_collection`) instead of building their own."""
+    service tests copy (`copied_collection`) instead of building their own. Read-only: copy it to change it."""
     from tests.pipeline.whole_runs import run_all, snapshot
 
-    root = data_root_with_inbox(tmp_path_factory.mktemp("kill-reference") / "data", tiny_demo)
-    done = run_all(root, None)
-    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-    return root, snapshot(f"sqlite:///{root / 'photoshape.db'}")
+    def build(folder: Path) -> tuple[Path, dict[str, Any]]:
+        root = data_root_with_inbox(folder / "data", tiny_demo)
+        done = run_all(root, None)
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        return root, snapshot(f"sqlite:///{root / 'photoshape.db'}")
+
+    return once_per_session(tmp_path_factory, "reference", build)
 
 
 def copied_collection(reference_root: Path, data_root: Path) -> Path:

@@ -21,7 +21,7 @@ import sqlalchemy as sa
 import yaml
 from tests.conftest import copied_collection
 
-pytestmark = [pytest.mark.prefect, pytest.mark.slow, pytest.mark.render, pytest.mark.xdist_group("reference")]
+pytestmark = [pytest.mark.prefect, pytest.mark.slow, pytest.mark.render]
 
 PHOTOSHAPE = str(Path(sys.executable).with_name("photoshape"))
 

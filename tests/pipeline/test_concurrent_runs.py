@@ -13,7 +13,7 @@ import sqlalchemy as sa
 from tests.conftest import data_root_with_inbox
 from tests.pipeline.whole_runs import PHOTOSHAPE, run_env, snapshot
 
-pytestmark = [pytest.mark.slow, pytest.mark.render, pytest.mark.postgres, pytest.mark.xdist_group("reference")]
+pytestmark = [pytest.mark.slow, pytest.mark.render, pytest.mark.postgres]
 
 
 def test_three_concurrent_runs_do_each_item_once(tiny_demo: Path, tmp_path: Path, pg_url: str,

@@ -31,7 +31,7 @@ from tests.pipeline.whole_runs import PHOTOSHAPE, run_all, run_env, snapshot
 
 from photoshape_flow.store import BlobStore
 
-pytestmark = [pytest.mark.slow, pytest.mark.render, pytest.mark.xdist_group("reference")]
+pytestmark = [pytest.mark.slow, pytest.mark.render]
 
 # (point, hit count) in pipeline order: SQLite passes all of them, PostgreSQL the first of each kind
 SQLITE_POINTS = [
