@@ -18,7 +18,11 @@ from prefect.artifacts import (
 
 from photoshape_flow.config import get_settings
 from photoshape_flow.db.session import session_scope
+from photoshape_flow.pipeline.progress import assumed_profile, rendering_progress
+from photoshape_flow.pipeline.runs import mark_dead_runs
 from photoshape_flow.progress_sink import progress_line
+from photoshape_flow.publish.gallery_site import write_contact_sheet
+from photoshape_flow.stages import stage_progress
 
 
 def candidate_rows(limit: int = 200, since_pair_ids: Sequence[int] | None = None,
@@ -59,10 +63,6 @@ def publish_summary(title: str, stage_times: dict[str, float], extra: dict[str, 
                     key: str = "photoshape-run-summary", changes: dict[str, int] | None = None) -> None:
     """Markdown: per-stage wall time and the done/pending/failed/rejected counts of every stage, and
     (`changes`, a `FitChanges` as a dict) how many parts the run's fit changed."""
-    from photoshape_flow.pipeline.progress import assumed_profile, rendering_progress
-    from photoshape_flow.pipeline.runs import mark_dead_runs
-    from photoshape_flow.stages import stage_progress
-
     with session_scope(get_settings().resolved_database_url) as session:
         mark_dead_runs(session)  # the summary's counts never include a killed run as running
         progress = stage_progress(session)
@@ -148,8 +148,6 @@ def publish_gallery_artifacts(gallery_index: str | None, method: str | None = No
 
     import cv2
     from prefect.artifacts import create_image_artifact, create_link_artifact
-
-    from photoshape_flow.publish.gallery_site import write_contact_sheet
 
     made: dict[str, str] = {}
     if gallery_index:

@@ -12,6 +12,7 @@ from typing import Any
 import yaml
 
 from photoshape_flow.config import get_settings
+from photoshape_flow.stages import REGISTRY
 
 
 def prefect_yaml_path() -> Path:
@@ -30,8 +31,6 @@ GENERATED_END = "  # <<< end of the generated stage deployments"
 
 def stage_deployments_yaml() -> str:
     """The YAML of one deployment per registered stage (flow, description and exclusivity from the registry)."""
-    from photoshape_flow.stages import REGISTRY
-
     lines = [GENERATED_BEGIN]
     for stage in REGISTRY:
         lines += [

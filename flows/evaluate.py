@@ -15,13 +15,23 @@ import math
 from typing import Any, Literal
 
 from photoshape_flow.flows.artifacts import Progress
+from photoshape_flow.flows.logs import forward_project_logs
 from photoshape_flow.flows.tasks import task_runner
 from prefect import flow, get_run_logger, task
 from prefect.artifacts import create_table_artifact
 from prefect.futures import as_completed
 
+from photoshape_flow.evaluation.tables import headline_rows, stage_rows
 from photoshape_flow.masking import install_password_masking
-from photoshape_flow.scoring.evaluate import EVAL_STAGES
+from photoshape_flow.scoring.evaluate import (
+    EVAL_STAGES,
+    evaluation_batches,
+    merge_scores,
+    metrics_table,
+    run_evaluation,
+    score_batch,
+)
+from photoshape_flow.scoring.groundtruth_registry import resolve_groundtruth
 
 install_password_masking()  # importing prefect configured its console and API log handlers: mask them too
 
@@ -31,9 +41,6 @@ RERENDER_MAX_PAIRS = 200  # per method, as `photoshape eval`: shared among the b
 
 @task(name="plan-evaluation")
 def plan_evaluation(groundtruth: str | None, source: str | None, batch_size: int) -> dict[str, Any]:
-    from photoshape_flow.scoring.evaluate import evaluation_batches
-    from photoshape_flow.scoring.groundtruth_registry import resolve_groundtruth
-
     path, _ = resolve_groundtruth(groundtruth)
     return {"groundtruth": str(path), "batches": evaluation_batches(path, batch_size, exemplar_source=source)}
 
@@ -41,10 +48,6 @@ def plan_evaluation(groundtruth: str | None, source: str | None, batch_size: int
 @task(name="evaluation-batch")
 def evaluation_batch(groundtruth: str, source: str | None, exemplar_ids: list[int],
                      rerender_max_pairs: int) -> dict[str, Any]:
-    from photoshape_flow.flows.logs import forward_project_logs
-
-    from photoshape_flow.scoring.evaluate import score_batch
-
     forward_project_logs()
     return score_batch(groundtruth, exemplar_ids, exemplar_source=source, rerender_max_pairs=rerender_max_pairs)
 
@@ -52,9 +55,6 @@ def evaluation_batch(groundtruth: str, source: str | None, exemplar_ids: list[in
 @task(name="run-evaluation")
 def run_evaluation_task(groundtruth: str, run: str | None, source: str | None, stages: list[str],
                         inference_scores: dict[str, Any] | None = None) -> dict[str, Any]:
-    from photoshape_flow.evaluation.tables import headline_rows, stage_rows
-    from photoshape_flow.scoring.evaluate import metrics_table, run_evaluation
-
     logger = get_run_logger()
     name, metrics = run_evaluation(groundtruth, run, stages=stages, exemplar_source=source,
                                    on_problem=logger.warning, inference_scores=inference_scores)
@@ -68,8 +68,6 @@ def evaluate(groundtruth: str | None = None, run: str | None = None, source: str
     """Compare pipeline outputs with a ground-truth file (default: the last one evaluated, else the
     newest demo's groundtruth.json); the inference figures are scored in batches of `batch_size`
     exemplars, one task each. `stages`: which stages to score (default: all)."""
-    from photoshape_flow.scoring.evaluate import merge_scores
-
     stages = list(stages or EVAL_STAGES)
     plan = plan_evaluation(groundtruth, source, batch_size)
     batches, path = (plan["batches"] if "inference" in stages else []), plan["groundtruth"]

@@ -10,9 +10,10 @@ import logging
 from collections.abc import Sequence
 from typing import Any
 
-from photoshape_flow.config import Settings
+from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.events import MATERIAL_EVENT, MATERIAL_SET_RESOURCE
 from photoshape_flow.ingest.common import one_line
+from photoshape_flow.stages import StageContext
 
 logger = logging.getLogger(__name__)
 
@@ -100,9 +101,6 @@ class PrefectEvents:
 def stage_context(settings: Settings | None = None, progress: Any = None) -> Any:
     """The stage context of the CLI and of the flows: the settings, events sent to Prefect, and the
     caller's progress sink (the CLI's bars or lines, a flow's progress artifacts; none by default)."""
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.stages import StageContext
-
     settings = settings or get_settings()
     extra = {} if progress is None else {"progress": progress}
     return StageContext.create(settings, events=PrefectEvents(settings), **extra)

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import logging
 
+from photoshape_flow.masking import PasswordMaskFilter
+
 PROJECT_LOGGER = "photoshape_flow"
 
 
@@ -30,8 +32,6 @@ def forward_project_logs(level: int = logging.INFO) -> logging.Logger:
 
     logger = logging.getLogger(PROJECT_LOGGER)
     if not any(isinstance(h, APILogHandler) for h in logger.handlers):
-        from photoshape_flow.masking import PasswordMaskFilter
-
         handler = APILogHandler()
         handler.addFilter(_in_a_run)
         handler.addFilter(PasswordMaskFilter())

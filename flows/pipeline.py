@@ -12,12 +12,19 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from photoshape_flow.flows.artifacts import candidate_rows, publish_candidates_table, publish_summary
+from photoshape_flow.flows.events import stage_context
 from photoshape_flow.flows.stages import STAGE_FLOWS, ProfileName, effective, timed
 from photoshape_flow.flows.tasks import task_runner
 from prefect import flow, get_run_logger
 
+from photoshape_flow.config import get_settings
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.fitting.changes import fit_changes, fit_snapshot
 from photoshape_flow.profiles import resolve_profile
-from photoshape_flow.stages import REGISTRY, STAGE_NAMES
+from photoshape_flow.stages import REGISTRY, STAGE_NAMES, Blocked, StageReport, get_stage
+from photoshape_flow.stages.new_materials import plan_material_rerun
+from photoshape_flow.stages.rerun import ORIGIN
+from photoshape_flow.stages.run import finish_run, record_report, start_run
 
 StageName = Literal[STAGE_NAMES]  # type: ignore[valid-type]
 
@@ -32,11 +39,6 @@ def run_stage_flows(profile: str, overrides: list[str], names: Sequence[str], or
     `details(stage)`, called after each stage, adds to its recorded report (the re-run's
     changed-parts counts on `fit`).
     """
-    from photoshape_flow.flows.events import stage_context
-
-    from photoshape_flow.stages import Blocked, StageReport, get_stage
-    from photoshape_flow.stages.run import finish_run, record_report, start_run
-
     ctx = stage_context()
     run_id = start_run(ctx, resolve_profile(profile, overrides), list(names), origin=origin)
     results: dict[str, Any] = {}
@@ -95,12 +97,6 @@ def new_materials(profile: ProfileName | None = None, renders_per_material: int 
     rewritten. Training and bootstrap renders grow by `renders_per_material` per new material in the
     recorded overrides, which the nightly run (the full chain: retrain, then fit, then publish) uses.
     """
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.db.session import session_scope
-    from photoshape_flow.fitting.changes import fit_changes, fit_snapshot
-    from photoshape_flow.stages.new_materials import plan_material_rerun
-    from photoshape_flow.stages.rerun import ORIGIN
-
     url = get_settings().resolved_database_url
     name, sets = effective(profile, overrides)
     with session_scope(url) as session:

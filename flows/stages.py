@@ -13,10 +13,15 @@ import time
 from typing import Any, Literal
 
 from photoshape_flow.flows.artifacts import Progress, publish_candidates_table, publish_gallery_artifacts
+from photoshape_flow.flows.logs import forward_project_logs
 from photoshape_flow.flows.tasks import finish_stage, plan_batches, process_batch, run_whole_stage, task_runner
 from prefect import Flow, flow
 from prefect.futures import as_completed
 
+from photoshape_flow.config import get_settings
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.ingest.ingest_stage import IngestRequest
+from photoshape_flow.pipeline.runs import effective_profile
 from photoshape_flow.profiles import PROFILES
 from photoshape_flow.stages import REGISTRY, Stage
 
@@ -25,12 +30,6 @@ ProfileName = Literal[tuple(PROFILES)]  # type: ignore[valid-type]  # the profil
 
 def effective(profile: str | None, overrides: list[str] | None) -> tuple[str, list[str]]:
     """(profile name, overrides) of a flow run: `profile=None` is the one the collection was last run with."""
-    from photoshape_flow.flows.logs import forward_project_logs
-
-    from photoshape_flow.config import get_settings
-    from photoshape_flow.db.session import session_scope
-    from photoshape_flow.pipeline.runs import effective_profile
-
     forward_project_logs()  # every flow calls this first: its own process forwards the project's logs
     with session_scope(get_settings().resolved_database_url) as session:
         return effective_profile(session, profile, overrides or [])
@@ -98,8 +97,6 @@ def ingest(
     overrides: list[str] | None = None,
 ) -> dict[str, Any]:
     """Ingest the four collections; without paths, everything in <data_root>/inbox/{envmaps,materials,...}."""
-    from photoshape_flow.ingest.ingest_stage import IngestRequest
-
     given = {"shapes": shapes, "exemplars": exemplars, "materials": materials, "envmaps": envmaps}
     roots = {k: list(v) for k, v in given.items() if v} or None
     name, sets = effective(profile, overrides)

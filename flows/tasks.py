@@ -13,13 +13,17 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+from photoshape_flow.flows.artifacts import ArtifactProgress
 from photoshape_flow.flows.events import stage_context as _stage_context
 from photoshape_flow.flows.logs import forward_project_logs
 from prefect import get_run_logger, task
 from prefect.task_runners import ThreadPoolTaskRunner
 
+from photoshape_flow import stages
 from photoshape_flow.config import Settings, get_settings
+from photoshape_flow.db.holder import set_worker_name
 from photoshape_flow.masking import install_password_masking
+from photoshape_flow.profiles import resolve_profile
 
 install_password_masking()  # importing prefect configured its console and API log handlers: mask them too
 
@@ -47,8 +51,6 @@ def local_cluster_kwargs(settings: Settings) -> dict[str, Any]:
 def stage_context() -> Any:
     """The stage context inside a task: the project's log lines go to the task run in the UI, and its
     loops' progress to progress artifacts (`artifacts.ArtifactProgress`)."""
-    from photoshape_flow.flows.artifacts import ArtifactProgress
-
     forward_project_logs()
     return _stage_context(progress=ArtifactProgress())
 
@@ -62,8 +64,6 @@ def _logger() -> logging.Logger | logging.LoggerAdapter:
 
 def _name_claims() -> None:
     """Claims made by this task name its flow run, so `photoshape status` shows which run holds them."""
-    from photoshape_flow.db.holder import set_worker_name
-
     try:
         from prefect.runtime import flow_run
 
@@ -75,17 +75,13 @@ def _name_claims() -> None:
 
 
 def _profile(profile: str, overrides: list[str] | None) -> Any:
-    from photoshape_flow.profiles import resolve_profile
-
     return resolve_profile(profile, overrides or [])
 
 
 @task(name="plan-batches", task_run_name="plan {stage}")
 def plan_batches(stage: str, profile: str, overrides: list[str] | None, batch_size: int | None) -> list[dict[str, Any]]:
     """Units of work of a fanning-out stage, as {part, ids} dicts."""
-    from photoshape_flow.stages import plan_batches as plan
-
-    units = plan(stage, _profile(profile, overrides), stage_context(), batch_size)
+    units = stages.plan_batches(stage, _profile(profile, overrides), stage_context(), batch_size)
     _logger().info("%s: %d items in %d batches", stage, sum(len(u.ids) for u in units), len(units))
     return [{"part": u.part, "ids": list(u.ids)} for u in units]
 
@@ -94,10 +90,8 @@ def plan_batches(stage: str, profile: str, overrides: list[str] | None, batch_si
 def process_batch(stage: str, part: str, ids: list[int], profile: str, overrides: list[str] | None,
                   n: int) -> dict[str, Any]:
     """Claim the batch's items and run the stage on those won (see photoshape_flow.stages.run)."""
-    from photoshape_flow.stages import WorkUnit, process
-
     _name_claims()
-    report = process(stage, WorkUnit(part, tuple(ids)), _profile(profile, overrides), stage_context())
+    report = stages.process(stage, stages.WorkUnit(part, tuple(ids)), _profile(profile, overrides), stage_context())
     _logger().info("%s %s: %d done, %d skipped, %d failed of %d", stage, part, report.done, report.skipped,
                    report.failed, n)
     if report.blocked.count:
@@ -109,9 +103,7 @@ def process_batch(stage: str, part: str, ids: list[int], profile: str, overrides
 @task(name="finish-stage", task_run_name="finish {stage}")
 def finish_stage(stage: str, profile: str, overrides: list[str] | None) -> dict[str, Any] | None:
     """The stage's step after all its batches (pairs of coarse alignment, the gallery of publish)."""
-    from photoshape_flow.stages import finish
-
-    report = finish(stage, _profile(profile, overrides), stage_context())
+    report = stages.finish(stage, _profile(profile, overrides), stage_context())
     return None if report is None else report.to_dict()
 
 
@@ -119,9 +111,7 @@ def finish_stage(stage: str, profile: str, overrides: list[str] | None) -> dict[
 def run_whole_stage(stage: str, profile: str, overrides: list[str] | None = None,
                     work: Any = None) -> dict[str, Any]:
     """A stage that does not fan out (its pipeline function batches and resumes internally)."""
-    from photoshape_flow.stages import run_stage
-
     _name_claims()
-    report = run_stage(stage, _profile(profile, overrides), stage_context(), work)
+    report = stages.run_stage(stage, _profile(profile, overrides), stage_context(), work)
     _logger().info("%s finished in %.1f s", stage, report.seconds)
     return report.to_dict()
