@@ -64,9 +64,10 @@ def probe(profile: str, pairs: int, overrides: list[str]) -> dict:
     """Runs the stage (this process is fresh) and returns its summary and timings."""
     from photoshape_flow.config import get_settings
     from photoshape_flow.db.session import session_scope
-    from photoshape_flow.fitting.fit import fit_pairs_of, run_fit
+    from photoshape_flow.fitting.fit import run_fit
+    from photoshape_flow.fitting.pairs import fit_pairs_of
     from photoshape_flow.method_keys import MethodKey
-    from photoshape_flow.networks.classifiers import resolve_classifier
+    from photoshape_flow.networks.classifier_rows import resolve_classifier
     from photoshape_flow.profiles import resolve_profile
 
     cfg = resolve_profile(profile, overrides).profile.fit

@@ -29,9 +29,12 @@ OUTSIDE_SRC = (f"{PACKAGE}.migrations",)
 # Modules that must load without these (statically: their module-level imports, followed through the
 # package, reach no module that imports one at its top): `photoshape --help` loads the CLI and the
 # profiles (`tests/test_profiles.py`), flows and `photoshape status`/`claims`/`serve` load the stage
-# registry, and the colour likelihood is the ranking rule's, read without a network.
+# registry, the colour likelihood is the ranking rule's, read without a network, and `photoshape serve`
+# loads the flows (their planners read rows: `networks.classifier_rows`, `recognition.material_sets`).
 LIGHT: dict[str, tuple[str, ...]] = {
     f"{PACKAGE}.cli": ("torch", "numpy"),
+    f"{PACKAGE}.flows.pipeline": ("torch",),
+    f"{PACKAGE}.flows.deployments": ("torch",),
     f"{PACKAGE}.profiles": ("torch", "numpy"),
     f"{PACKAGE}.stages": ("torch",),
     f"{PACKAGE}.classify.color_prior": ("torch",),

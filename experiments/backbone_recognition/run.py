@@ -31,7 +31,8 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.devices import set_torch_threads
 from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.recognition.bn_prior import photo_cases
-from photoshape_flow.recognition.training import material_set, run_training
+from photoshape_flow.recognition.material_sets import material_set
+from photoshape_flow.recognition.training import run_training
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 

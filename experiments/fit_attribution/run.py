@@ -51,7 +51,7 @@ from photoshape_flow.fit.select import rank_candidates
 from photoshape_flow.fitting.calibration import ensure_calibration
 from photoshape_flow.fitting.context import FitContext, PairData, load_pair
 from photoshape_flow.fitting.fit import candidates_of, exemplar_lighting, select_materials
-from photoshape_flow.networks.classifiers import resolve_classifier
+from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.recognition.inference import ALIGNMENT_METHOD
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth

@@ -60,7 +60,7 @@ from photoshape_flow.fitting import calibration as fc
 from photoshape_flow.fitting.context import FitContext, PairData
 from photoshape_flow.fitting.fit import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed
-from photoshape_flow.networks.classifiers import resolve_classifier
+from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
 from photoshape_flow.render.specs import linear_to_srgb

@@ -297,6 +297,10 @@ def resolve_profile(name: str | Profile, overrides: Sequence[str] | Mapping[str,
     items = list(overrides.items()) if isinstance(overrides, Mapping) else [_split(text) for text in overrides]
     for path, value in items:
         profile = _set(profile, path.split("."), value, path)
+    try:
+        profile.training.check()
+    except ValueError as exc:
+        raise ProfileError(f"training: {exc}") from None
     pairs = tuple((path, value if isinstance(value, str) else json.dumps(value)) for path, value in items)
     return ResolvedProfile(profile.name, pairs, profile)
 
@@ -320,7 +324,12 @@ def _set(obj: Any, keys: list[str], value: Any, path: str) -> Any:
         raise ProfileError(f"{path}: no field {key!r} (choose from {choices})")
     if len(keys) > 1:
         return replace(obj, **{key: _set(getattr(obj, key), keys[1:], value, path)})
-    return replace(obj, **{key: _coerce(value, hints[key], path)})
+    try:
+        return replace(obj, **{key: _coerce(value, hints[key], path)})
+    except ProfileError:
+        raise
+    except ValueError as exc:  # a config's own validation (e.g. an unknown choice)
+        raise ProfileError(f"{path}: {exc}") from None
 
 
 def _coerce(value: Any, hint: Any, path: str) -> Any:

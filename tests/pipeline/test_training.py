@@ -238,3 +238,54 @@ def test_the_part_recogniser_trains_through_the_stage_and_records_its_weights(db
     assert type(classifier.model).__name__ == "PartRecognizer" and not classifier.model.training
     # the ResNet on the same data is another network (the architecture is in the hash), not a reuse
     assert run_training("tiny") != classifier_id
+
+
+def test_the_descriptor_stores_each_materials_vector_and_a_kill_while_computing_them_resumes_the_same(
+        db_url: str, store, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The descriptor (D61): trained by the same stage, its material vectors computed from the training
+    renders through the selected weights and stored in the checkpoint; killed while computing them,
+    the next run resumes the row and stores the same weights and vectors."""
+    import torch
+
+    from photoshape_flow.classify import checkpoint as ckpt
+    from photoshape_flow.classify.dataset import RegionDataset, find_regions
+    from photoshape_flow.classify.descriptor import fit_prototypes
+    from photoshape_flow.classify.train import select_best
+
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 8, "a")
+    overrides = {"arch": "efficientnet-lite0", "crop_size": 32, "head": "descriptor"}
+    real = train_module.fit_prototypes
+
+    def killed(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise RuntimeError("worker killed while computing material vectors")
+
+    monkeypatch.setattr(train_module, "fit_prototypes", killed)
+    with pytest.raises(RuntimeError, match="killed"):
+        run_training("tiny", overrides=overrides)
+    with session_scope(db_url) as session:
+        (row,) = session.scalars(sa.select(Classifier)).all()
+        session.expunge(row)
+    assert row.status == "failed" and row.epoch == 2  # every epoch saved; the vectors were not
+    trained = select_best(ckpt.slim(ckpt.load(store.read_bytes(row.checkpoint_blob))))["model"]
+
+    monkeypatch.setattr(train_module, "fit_prototypes", real)
+    assert run_training("tiny", overrides=overrides) == row.id
+    done = _classifier(db_url, row.id)
+    assert done.status == "ok" and done.architecture == "efficientnet-lite0-desc32"
+    assert done.metrics["history"] == row.metrics["history"]  # resumed, not retrained
+    stored = ckpt.load(store.read_bytes(done.checkpoint_blob))["model"]
+    assert all(torch.equal(stored[k], v) for k, v in trained.items() if k not in ("prototypes", "has_prototypes"))
+    assert bool(stored["has_prototypes"])
+    _, classifier = load_material_classifier(row.id)
+    model = classifier.model
+    assert type(model).__name__ == "MaterialDescriptor" and not model.training
+    # the stored vectors are those of the selected weights over the training renders, recomputed
+    from photoshape_flow.recognition.material_sets import material_set
+    from photoshape_flow.recognition.training import training_data
+
+    with session_scope(db_url) as session:
+        data, listed = training_data(session, store), material_set(session)
+    renders = RegionDataset(data.train, find_regions(data.train, listed.ids, listed.substance_of), 32)
+    fit_prototypes(model, renders)
+    assert torch.allclose(model.prototypes, stored["prototypes"], atol=1e-6)

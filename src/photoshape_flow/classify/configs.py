@@ -65,6 +65,9 @@ class AugmentConfig:
     max_tries: int = 4
 
 
+HEADS = ("heads", "descriptor")
+
+
 @dataclass(frozen=True)
 class ClassifierConfig:
     name: str
@@ -103,6 +106,19 @@ class ClassifierConfig:
     isolate_part: bool = True  # paint pixels outside the part white before the backbone
     train_from_stage: int = 4  # stages below stay frozen at their ImageNet weights
     backbone_lr_scale: float = 0.1  # step of the fine-tuned blocks relative to the new heads
+    # "heads": the paper's linear material and substance heads; "descriptor": the material head is a
+    # shared photo/material descriptor with each material the mean of its renders' (`classify.descriptor`)
+    head: str = "heads"
+
+    def __post_init__(self) -> None:
+        if self.head not in HEADS:
+            raise ValueError(f"head: {self.head!r} is not one of {', '.join(HEADS)}")
+
+    def check(self) -> None:
+        """Raise ValueError for fields that contradict each other (checked once all are set)."""
+        if self.head != "heads" and not self.uses_backbone:
+            raise ValueError(f"head {self.head!r} needs a pretrained backbone arch (efficientnet-lite*), "
+                             f"not {self.arch!r}")
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -131,7 +147,7 @@ class ClassifierConfig:
     @property
     def architecture(self) -> str:
         if self.uses_backbone:
-            return f"{self.arch}-part{self.crop_size}"
+            return f"{self.arch}-{'desc' if self.head == 'descriptor' else 'part'}{self.crop_size}"
         return self.arch if self.width == 64 else f"{self.arch}-w{self.width}"
 
 
@@ -228,6 +244,8 @@ def config_hash(config: ClassifierConfig) -> str:
     if not config.uses_backbone:
         for key in _RECOGNISER_FIELDS:
             data.pop(key, None)
+    if config.head == "heads":  # added with the descriptor: the two-head networks keep their hashes
+        data.pop("head", None)
     for key in _PHOTO_AUGMENT_FIELDS:
         if not data["augment"].get(key):
             data["augment"].pop(key, None)

@@ -150,9 +150,13 @@ class PartRecognizer(nn.Module):
         feats = self.dropout(self.features(x))
         return self.fc_material(feats), self.fc_substance(feats)
 
+    def head_parameters(self) -> list[nn.Parameter]:
+        """The parameters that start from random (trained at the full step)."""
+        return [*self.fc_material.parameters(), *self.fc_substance.parameters()]
+
     def parameter_groups(self, weight_decay: float, backbone_lr_scale: float) -> list[dict[str, Any]]:
         """Trainable backbone blocks at a smaller step than the new heads (which start from random)."""
-        heads = [*self.fc_material.parameters(), *self.fc_substance.parameters()]
+        heads = self.head_parameters()
         head_ids = {id(p) for p in heads}
         body = [p for p in self.parameters() if p.requires_grad and id(p) not in head_ids]
         return [{"params": heads, "weight_decay": weight_decay, "lr_scale": 1.0},

@@ -54,11 +54,11 @@ from photoshape_flow.fitting.context import (
     reference_pair,
     weights_report,
 )
+from photoshape_flow.fitting.pairs import fit_pairs_of
 from photoshape_flow.fitting.refine import is_refined, refine_rows
 from photoshape_flow.fitting.steps import candidates_of, lighting_estimate, select_materials
 from photoshape_flow.hashing import stable_hash
-from photoshape_flow.networks.classifiers import resolve_classifier
-from photoshape_flow.pipeline.progress import active_pairs
+from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.profiles import FitConfig
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.recognition.inference import IDENTITY_UV
@@ -186,16 +186,6 @@ def changed_parts(data: PairData, rows: Sequence[m.Assignment]) -> int:
 
 
 # -- the run ---------------------------------------------------------------------------------------------
-def fit_pairs_of(session: Session, source_key: str, pair_ids: Sequence[int] | None = None) -> list[int]:
-    """Active, aligned pairs with rows of `source_key`, in id order."""
-    query = active_pairs().where(
-        m.Pair.id.in_(sa.select(m.Assignment.pair_id).where(m.Assignment.method_key == source_key))
-    ).order_by(m.Pair.id)
-    if pair_ids is not None:
-        query = query.where(m.Pair.id.in_(list(pair_ids)))
-    return list(session.execute(query).scalars())
-
-
 def run_fit(cfg: FitConfig, *, pair_ids: Sequence[int] | None = None, settings: Settings | None = None,
             renderer: RendererProtocol | None = None, classifier_id: int | None = None,
             progress: Progress | None = None, store: BlobStore | None = None) -> FitSummary:

@@ -6,9 +6,10 @@ Fans out over the pairs the newest material classifier ranked; the pipeline clai
 
 from __future__ import annotations
 
-from photoshape_flow.fitting.fit import fit_pairs_of, run_fit
+from photoshape_flow.fitting.fit import run_fit
+from photoshape_flow.fitting.pairs import fit_pairs_of
 from photoshape_flow.method_keys import MethodKey
-from photoshape_flow.networks.classifiers import resolve_classifier
+from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.report import StageReport, blocked_by
 from photoshape_flow.pipeline.work import WorkUnit

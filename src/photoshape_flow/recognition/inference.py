@@ -33,7 +33,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
 from photoshape_flow.method_keys import MethodKey
-from photoshape_flow.networks.classifiers import resolve_classifier
+from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.progress_sink import Progress, no_progress
 from photoshape_flow.recognition.part_evidence import (
     RankingContext,

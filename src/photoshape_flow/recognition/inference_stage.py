@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 
 from photoshape_flow.db import models as m
-from photoshape_flow.networks.classifiers import resolve_classifier
+from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.pipeline.context import StageContext
 from photoshape_flow.pipeline.progress import active_pairs
 from photoshape_flow.pipeline.report import StageReport, blocked_by

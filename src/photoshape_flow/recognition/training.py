@@ -12,13 +12,16 @@
    the loop restarts at the next epoch with the saved optimizer, log-variances and RNG state.
 4. Otherwise a new row (status "training") is written. When the material set grew since the newest
    ok material classifier of the same architecture (its materials a strict subset of the current
-   ones), training starts from it: `grow_material_head` keeps the trained rows, adds the new ones,
-   and only `config.finetune_epochs` are run (`parent_id` records it). `finetune_from` forces a parent.
+   ones), training starts from it: `classify.networks.grow_materials` keeps the trained rows, adds the
+   new ones, and only `config.finetune_epochs` are run (`parent_id` records it). `finetune_from`
+   forces a parent.
 5. Each epoch's checkpoint goes to the blob store, then onto the row (blob first, then row). At the
    end the row gets the slim (inference) checkpoint, holding the weights of the best validation
    epoch when the config has a `select_metric` (else the last), that epoch's Table 4 metrics
    (`metrics.selected_epoch` says which) and status "ok"; the
-   metrics are also written as `Evaluation` rows (run = classifier name, stage "training").
+   metrics are also written as `Evaluation` rows (run = classifier name, stage "training"). A
+   descriptor network (`head="descriptor"`) first gets each material's descriptor from the training
+   renders through those weights (`classify.descriptor.fit_prototypes`).
 """
 
 from __future__ import annotations
@@ -37,20 +40,21 @@ from photoshape_flow.classify import checkpoint as ckpt
 from photoshape_flow.classify.backbone import backbone_record
 from photoshape_flow.classify.configs import ClassifierConfig, config_hash, get_config
 from photoshape_flow.classify.dataset import RegionDataset, RenderItem, find_regions
-from photoshape_flow.classify.networks import build_network
-from photoshape_flow.classify.resnet import grow_material_head
+from photoshape_flow.classify.descriptor import fit_prototypes
+from photoshape_flow.classify.networks import build_network, grow_materials
 from photoshape_flow.classify.train import history_entry, select_best, train_classifier
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db.base import utcnow
-from photoshape_flow.db.models import Classifier, Evaluation, Material, Rendering
+from photoshape_flow.db.models import Classifier, Evaluation, Rendering
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.db.upsert import upsert
 from photoshape_flow.devices import resolve_device, set_torch_threads
 from photoshape_flow.faults import fault_point
 from photoshape_flow.hashing import stable_hash
-from photoshape_flow.networks.classifiers import newest_material_classifier
+from photoshape_flow.networks.classifier_rows import newest_material_classifier
 from photoshape_flow.pipeline.errors import error_line
 from photoshape_flow.progress_sink import Progress, no_progress
+from photoshape_flow.recognition.material_sets import MaterialSet, material_set
 from photoshape_flow.store import BlobStore, default_store
 from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK
 
@@ -60,36 +64,6 @@ CODE_VERSION = "material-classifier-1"
 STATUS_TRAINING = "training"
 TRAINING_KINDS: tuple[str, ...] = ("training",)
 METRIC_KEYS = ("mtl@1", "mtl@5", "sub@1", "sub-mtl@1")
-
-
-@dataclass(frozen=True)
-class MaterialSet:
-    """The classifier's output list: material ids (head order, background excluded) and substances."""
-
-    ids: tuple[int, ...]
-    names: tuple[str, ...]
-    substances: tuple[str, ...]
-    hash: str
-
-    @property
-    def substance_of(self) -> dict[int, str]:
-        return dict(zip(self.ids, self.substances, strict=True))
-
-
-def material_set(session: Session) -> MaterialSet:
-    """Enabled, ok materials ordered by id, with the hash that identifies the set."""
-    rows = session.execute(
-        sa.select(Material.id, Material.name, Material.substance)
-        .where(Material.enabled.is_(True), Material.status == STATUS_OK)
-        .order_by(Material.id)
-    ).all()
-    triples = [(int(r.id), str(r.name), str(r.substance)) for r in rows]
-    return MaterialSet(
-        ids=tuple(t[0] for t in triples),
-        names=tuple(t[1] for t in triples),
-        substances=tuple(t[2] for t in triples),
-        hash=stable_hash(triples),
-    )
 
 
 @dataclass(frozen=True)
@@ -179,6 +153,15 @@ def _drop_superseded(store: BlobStore, old: str | None, new: str) -> None:
     """
     if old and old != new:
         store.delete(old)
+
+
+def _with_prototypes(checkpoint: dict[str, Any], renders: RegionDataset, cfg: ClassifierConfig,
+                     device: Any) -> dict[str, Any]:
+    """`checkpoint` with the descriptor's prototypes set from `renders` (read without augmentation)."""
+    model = ckpt.build_model(checkpoint).to(device)
+    parts = fit_prototypes(model, renders, seed=cfg.seed, batch_size=cfg.eval_batch_size, device=device)
+    log.info("material descriptors from %d rendered parts", parts)
+    return {**checkpoint, "model": {k: v.detach().cpu() for k, v in model.state_dict().items()}}
 
 
 def run_training(
@@ -286,8 +269,8 @@ def run_training(
         elif parent_ref is not None:
             parent_ckpt = ckpt.load(store.read_bytes(parent_ref))
             model = ckpt.build_model(parent_ckpt)
-            grow_material_head(model, parent_ckpt["materials"], materials.ids, substance_of,
-                               generator=torch.Generator().manual_seed(cfg.seed))
+            grow_materials(model, parent_ckpt["materials"], materials.ids, substance_of,
+                           generator=torch.Generator().manual_seed(cfg.seed))
         else:
             model = build_network(cfg, len(materials.ids), seed=cfg.seed)
 
@@ -320,6 +303,9 @@ def run_training(
             final = resume
         assert final is not None
         final = select_best(ckpt.slim(final))  # the best validation epoch's weights when the config selects
+        if cfg.head == "descriptor":  # each material's descriptor from its renders, with the selected weights
+            final = _with_prototypes(final, RegionDataset(data.train, train_examples, cfg.image_size,
+                                                          frame=cfg.frame_object), cfg, device)
         ref = store.put_bytes(ckpt.to_bytes(final), "pt")
         metrics = _metrics(
             result.history,

@@ -26,11 +26,11 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.db import models as m
-from photoshape_flow.fitting.fit import fit_pairs_of
+from photoshape_flow.fitting.pairs import fit_pairs_of
 from photoshape_flow.method_keys import MethodKey
-from photoshape_flow.networks.classifiers import newest_material_classifier, resolve_classifier
+from photoshape_flow.networks.classifier_rows import newest_material_classifier, resolve_classifier
 from photoshape_flow.profiles import resolve_profile
-from photoshape_flow.recognition.training import material_set
+from photoshape_flow.recognition.material_sets import material_set
 
 log = logging.getLogger(__name__)
 
