@@ -289,3 +289,41 @@ def test_the_descriptor_stores_each_materials_vector_and_a_kill_while_computing_
     renders = RegionDataset(data.train, find_regions(data.train, listed.ids, listed.substance_of), 32)
     fit_prototypes(model, renders)
     assert torch.allclose(model.prototypes, stored["prototypes"], atol=1e-6)
+
+
+def test_a_descriptor_reads_new_materials_from_their_renders_without_training(db_url: str, store) -> None:
+    """`finetune_epochs=0`: the grown descriptor keeps its parent's weights; the new material's vector is
+    the mean descriptor of its rendered parts (MatCLIP's point: a material added later, no retrain)."""
+    import torch
+
+    from photoshape_flow.classify import checkpoint as ckpt
+    from photoshape_flow.classify.dataset import RegionDataset, find_regions
+    from photoshape_flow.recognition.material_sets import material_set
+    from photoshape_flow.recognition.training import training_data
+
+    overrides = {"arch": "efficientnet-lite0", "crop_size": 32, "head": "descriptor", "finetune_epochs": 0}
+    materials = _add_materials(db_url, TOY)
+    _add_renders(db_url, store, materials, 8, "a")
+    first = run_training("tiny", overrides=overrides)
+    new = _add_materials(db_url, {"walnut": ("wood", (90, 50, 20))})
+    _add_renders(db_url, store, {**materials, **new}, 8, "bb")
+    second = run_training("tiny", overrides=overrides)
+    row, parent = _classifier(db_url, second), _classifier(db_url, first)
+    assert row.status == "ok" and row.parent_id == first and row.epoch == 0 and row.metrics["history"] == []
+    grown = ckpt.load(store.read_bytes(row.checkpoint_blob))["model"]
+    trained = ckpt.load(store.read_bytes(parent.checkpoint_blob))["model"]
+    kept = [k for k in trained if not k.startswith("fc_material") and k not in ("prototypes", "has_prototypes")]
+    assert kept and all(torch.equal(grown[k], trained[k]) for k in kept)  # not trained: same weights
+    _, classifier = load_material_classifier(second)
+    model = classifier.model
+    (walnut,) = new
+    with session_scope(db_url) as session:
+        data, listed = training_data(session, store), material_set(session)
+    label = listed.ids.index(walnut) + 1
+    examples = [e for e in find_regions(data.train, listed.ids, listed.substance_of) if e.label == label]
+    x = torch.stack([RegionDataset(data.train, examples, 32)[i][0] for i in range(len(examples))])
+    with torch.no_grad():
+        expected = torch.nn.functional.normalize(model.describe(x).mean(0), dim=0)
+    assert torch.allclose(model.prototypes[label - 1], expected, atol=1e-5)
+    with pytest.raises(ValueError, match="needs head 'descriptor'"):
+        run_training("tiny", overrides={"finetune_epochs": 0})

@@ -119,6 +119,9 @@ class ClassifierConfig:
         if self.head != "heads" and not self.uses_backbone:
             raise ValueError(f"head {self.head!r} needs a pretrained backbone arch (efficientnet-lite*), "
                              f"not {self.arch!r}")
+        if self.finetune_epochs < 1 and self.head != "descriptor":
+            raise ValueError("finetune_epochs 0 (new materials read from their renders, no training) needs "
+                             "head 'descriptor'")
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)

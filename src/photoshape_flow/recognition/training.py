@@ -14,7 +14,8 @@
    ok material classifier of the same architecture (its materials a strict subset of the current
    ones), training starts from it: `classify.networks.grow_materials` keeps the trained rows, adds the
    new ones, and only `config.finetune_epochs` are run (`parent_id` records it). `finetune_from`
-   forces a parent.
+   forces a parent. A descriptor (`head="descriptor"`) with `finetune_epochs=0` is not trained at
+   all: the new materials are read from their renders (step 5's vectors), the row's epoch is 0.
 5. Each epoch's checkpoint goes to the blob store, then onto the row (blob first, then row). At the
    end the row gets the slim (inference) checkpoint, holding the weights of the best validation
    epoch when the config has a `select_metric` (else the last), that epoch's Table 4 metrics
@@ -186,6 +187,7 @@ def run_training(
 
     settings = settings or get_settings()
     cfg = config if isinstance(config, ClassifierConfig) else get_config(config, **(overrides or {}))
+    cfg.check()
     url = settings.resolved_database_url
     store = store if store is not None else default_store(settings)
     set_torch_threads(settings.torch_threads)
@@ -301,6 +303,9 @@ def run_training(
         final = result.checkpoint
         if final is None:  # already complete before this call (resumed at the last epoch)
             final = resume
+        if final is None and epochs == 0:  # a descriptor's grown list, `finetune_epochs=0`: vectors only
+            final = ckpt.make_checkpoint(model, materials=materials.ids, material_substances=materials.substances,
+                                         image_size=cfg.image_size, config=cfg.to_dict(), epoch=0, history=[])
         assert final is not None
         final = select_best(ckpt.slim(final))  # the best validation epoch's weights when the config selects
         if cfg.head == "descriptor":  # each material's descriptor from its renders, with the selected weights
