@@ -1,13 +1,16 @@
-"""What both experiments load once: the ranking's evidence as inference fits it.
+"""What the experiments share: the ranking's evidence as inference fits it, and one region scorer.
 
 `load_evidence` gives the colour likelihood (sigma fit on the validation renders), the calibrated
 substance network (its part-level temperature) and the material colours that inference uses, so the
-experiments score exactly what the pipeline ranks with. `results_dir` is where an experiment writes
+experiments score exactly what the pipeline ranks with. `region_hits` and `interval` score a classifier
+on labelled regions (validation renders made photo-like, or a world's photos through true masks) the
+same way for every experiment that compares classifiers. `results_dir` is where an experiment writes
 its output: under the data root it measured, next to the networks the figures belong to.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,6 +28,48 @@ from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
 from photoshape_flow.recognition.substance_temperature import substance_temperature
 from photoshape_flow.recognition.training import training_data
 from photoshape_flow.store import BlobStore
+from photoshape_flow.vocab import SUBSTANCE_LABELS
+
+# the columns of `region_hits`' rows
+HIT_COLUMNS = ("case", "material", "top1", "top5", "substance_top", "substance_head", "substance_mass")
+
+
+def region_hits(model: Any, cases: Sequence[Any], enabled: Iterable[int]) -> np.ndarray:
+    """One row per labelled region whose true material the classifier knows, in `HIT_COLUMNS` order.
+
+    `model` is a `classify.infer.MaterialClassifier`; each case has `image`, `masks` and `truth` (material
+    ids). Only the `enabled` materials compete. Substance hits: of the top material, of the substance head,
+    and of the material head's probability mass summed per substance.
+    """
+    keep = set(enabled)
+    columns = np.array([i + 1 for i, mid in enumerate(model.materials) if mid in keep])
+    ids = np.asarray(model.materials)[columns - 1]
+    subs_of = np.asarray(model.material_substances)[columns - 1]
+    rows: list[tuple[float, ...]] = []
+    for c, case in enumerate(cases):
+        mats, subs = model.predict(case.image, list(case.masks))
+        p = mats[:, columns]
+        for k, true in enumerate(case.truth):
+            where = np.nonzero(ids == true)[0]
+            if not len(where):
+                continue
+            t = int(where[0])
+            order = np.argsort(-p[k])
+            head = SUBSTANCE_LABELS[1 + int(np.argmax(subs[k][1:]))]
+            mass = {s: float(p[k][subs_of == s].sum()) for s in set(subs_of)}
+            rows.append((c, true, float(order[0] == t), float(t in order[:5]), float(subs_of[order[0]] == subs_of[t]),
+                         float(head == subs_of[t]), float(max(mass, key=mass.get) == subs_of[t])))
+    return np.asarray(rows, float).reshape(-1, len(HIT_COLUMNS))
+
+
+def interval(values: np.ndarray, groups: np.ndarray, rng: np.random.Generator, draws: int = 1000) -> list[float] | None:
+    """[mean, 2.5%, 97.5%] of `values`, resampling whole groups (renders or photos) with replacement; None if empty."""
+    unique = np.unique(groups)
+    if not len(unique):
+        return None
+    boot = [np.concatenate([values[groups == g] for g in rng.choice(unique, len(unique))]).mean() for _ in range(draws)]
+    return [round(float(values.mean()), 3), round(float(np.percentile(boot, 2.5)), 3),
+            round(float(np.percentile(boot, 97.5)), 3)]
 
 
 def results_dir(settings: Settings, experiment: str) -> Path:

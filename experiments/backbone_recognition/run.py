@@ -34,9 +34,8 @@ from photoshape_flow.recognition.bn_prior import photo_cases
 from photoshape_flow.recognition.material_sets import material_set
 from photoshape_flow.recognition.training import run_training
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import SUBSTANCE_LABELS
 
-from ..common import results_dir
+from ..common import interval, region_hits, results_dir
 
 
 def arm_config(spec: str):
@@ -55,38 +54,16 @@ def arm_config(spec: str):
 
 
 def score(model: Any, cases: list, enabled: set[int]) -> dict[str, Any]:
-    """Per-region hits of material top-1/top-5 and substance (head, material mass), with per-render groups."""
-    columns = np.array([i + 1 for i, mid in enumerate(model.materials) if mid in enabled])
-    ids = np.asarray(model.materials)[columns - 1]
-    subs_of = np.asarray(model.material_substances)[columns - 1]
-    rows: list[tuple[int, float, float, float, float]] = []
-    for c, case in enumerate(cases):
-        mats, subs = model.predict(case.image, list(case.masks))
-        p = mats[:, columns]
-        for k, true in enumerate(case.truth):
-            where = np.nonzero(ids == true)[0]
-            if not len(where):
-                continue
-            t = int(where[0])
-            order = np.argsort(-p[k])
-            true_sub = subs_of[t]
-            head = SUBSTANCE_LABELS[1 + int(np.argmax(subs[k][1:]))]
-            mass = {s: float(p[k][subs_of == s].sum()) for s in set(subs_of)}
-            rows.append((c, float(order[0] == t), float(t in order[:5]), float(head == true_sub),
-                         float(max(mass, key=mass.get) == true_sub)))
-    data = np.asarray(rows)
-    out: dict[str, Any] = {"regions": len(rows), "renders": len(cases), "hits": data.tolist()}
+    """Per-region hits of material top-1/top-5 and substance (head, material mass), with per-render groups.
+
+    Rows of "hits": render, top-1, top-5, substance of the substance head, substance of the mass.
+    """
+    hits = region_hits(model, cases, enabled)
+    data = hits[:, [0, 2, 3, 5, 6]]
+    out: dict[str, Any] = {"regions": len(data), "renders": len(cases), "hits": data.tolist()}
     rng = np.random.default_rng(0)
-    groups = data[:, 0].astype(int)
-    unique = np.unique(groups)
     for j, name in enumerate(("top1", "top5", "substance_head", "substance_mass"), start=1):
-        values = data[:, j]
-        boot = []
-        for _ in range(1000):
-            pick = rng.choice(unique, len(unique))
-            boot.append(np.concatenate([values[groups == g] for g in pick]).mean())
-        out[name] = [round(float(values.mean()), 3), round(float(np.percentile(boot, 2.5)), 3),
-                     round(float(np.percentile(boot, 97.5)), 3)]
+        out[name] = interval(data[:, j], data[:, 0].astype(int), rng)
     return out
 
 

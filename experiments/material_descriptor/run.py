@@ -63,7 +63,7 @@ from photoshape_flow.recognition.training import run_training, training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
-from ..common import results_dir
+from ..common import interval, region_hits, results_dir
 
 
 def late_materials(materials: MaterialSet, fraction: float = 0.25) -> set[int]:
@@ -164,37 +164,20 @@ def world_cases(groundtruth: Path, material_ids: dict[str, int]) -> list[PhotoCa
 
 
 def score(model: Any, cases: list, materials: MaterialSet, late: set[int]) -> dict[str, Any]:
-    """Per-region hits (top-1, top-5, substance of the top material and of the mass) with bootstrap intervals."""
-    ids = np.asarray(model.materials)
-    subs_of = np.asarray(model.material_substances)
-    columns = np.array([i + 1 for i, mid in enumerate(ids) if mid in set(materials.ids)])
-    ids, subs_of = ids[columns - 1], subs_of[columns - 1]
-    rows = []
-    for c, case in enumerate(cases):
-        mats, _subs = model.predict(case.image, list(case.masks))
-        p = mats[:, columns]
-        for k, true in enumerate(case.truth):
-            where = np.nonzero(ids == true)[0]
-            if not len(where):
-                continue
-            t = int(where[0])
-            order = np.argsort(-p[k])
-            mass = {s: float(p[k][subs_of == s].sum()) for s in set(subs_of)}
-            rows.append((c, int(true in late), float(order[0] == t), float(t in order[:5]),
-                         float(subs_of[order[0]] == subs_of[t]), float(max(mass, key=mass.get) == subs_of[t])))
-    data = np.asarray(rows)
-    out: dict[str, Any] = {"regions": len(rows), "late_regions": int(data[:, 1].sum()), "hits": data.tolist()}
+    """Per-region hits (top-1, top-5, substance of the top material and of the mass) with bootstrap intervals.
+
+    Rows of "hits" (what compare.py reads): case, late material (0/1), top-1, top-5, substance of the top
+    material, substance of the mass.
+    """
+    hits = region_hits(model, cases, materials.ids)
+    late_flag = np.isin(hits[:, 1], sorted(late)).astype(float)
+    data = np.column_stack([hits[:, 0], late_flag, hits[:, [2, 3, 4, 6]]])
+    out: dict[str, Any] = {"regions": len(data), "late_regions": int(late_flag.sum()), "hits": data.tolist()}
     rng = np.random.default_rng(0)
-    for subset, keep in (("all", np.ones(len(data), bool)), ("late", data[:, 1] == 1)):
+    for subset, keep in (("all", np.ones(len(data), bool)), ("late", late_flag == 1)):
         sub = data[keep]
-        groups = sub[:, 0].astype(int)
-        unique = np.unique(groups)
         for j, name in enumerate(("top1", "top5", "substance_top", "substance_mass"), start=2):
-            values = sub[:, j]
-            boot = [np.concatenate([values[groups == g] for g in rng.choice(unique, len(unique))]).mean()
-                    for _ in range(1000)]
-            out[f"{subset}.{name}"] = [round(float(values.mean()), 3), round(float(np.percentile(boot, 2.5)), 3),
-                                       round(float(np.percentile(boot, 97.5)), 3)]
+            out[f"{subset}.{name}"] = interval(sub[:, j], sub[:, 0].astype(int), rng)
     return out
 
 
