@@ -49,7 +49,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
@@ -66,6 +65,7 @@ from photoshape_flow.render.specs import (
     refined_uv_matrix,
     srgb_to_linear,
 )
+from photoshape_flow.render.texture_cache import TEXTURE_CACHE_BYTES, ByteLRU
 
 AOV_CHANNELS: dict[str, tuple[str, int]] = {
     # name -> (Mitsuba AOV type, channels)
@@ -149,10 +149,11 @@ def make_mesh(
     return mesh
 
 
-@lru_cache(maxsize=24)
-def _load_texture(path: str, mtime_ns: int, kind: str, max_size: int) -> np.ndarray:
-    """Load (and cache) a texture as linear float32 (H, W, C): RGB for colour/normal, 1 channel for scalars."""
-    del mtime_ns  # part of the cache key only: an edited file is reloaded
+TEXTURES = ByteLRU(TEXTURE_CACHE_BYTES)  # decoded maps by (path, mtime, kind, size cap)
+
+
+def _load_texture(path: str, kind: str, max_size: int) -> np.ndarray:
+    """Load a texture as linear float32 (H, W, C): RGB for colour/normal, 1 channel for scalars."""
     mi = ensure_mitsuba()
     try:
         bitmap = mi.Bitmap(path)
@@ -174,13 +175,14 @@ def _load_texture(path: str, mtime_ns: int, kind: str, max_size: int) -> np.ndar
 
 
 def texture_array(path: Path, kind: Literal["albedo", "scalar", "normal"], max_size: int) -> np.ndarray:
-    """Linear float32 (H, W, C) texture of a material map (cached by path, mtime, kind and size cap)."""
+    """Linear float32 (H, W, C) texture of a material map (cached by path, mtime, kind and size cap: an
+    edited file is reloaded)."""
     path = Path(path)
     try:
         mtime = path.stat().st_mtime_ns
     except OSError as exc:
         raise ValueError(f"{path}: texture file missing ({exc.strerror})") from exc
-    return _load_texture(str(path), mtime, kind, max_size)
+    return TEXTURES.get_or_load((str(path), mtime, kind, max_size), lambda: _load_texture(str(path), kind, max_size))
 
 
 def _constant(value: Sequence[float] | float) -> np.ndarray:
