@@ -42,6 +42,7 @@ from photoshape_flow.demo import newest_groundtruth
 from photoshape_flow.evaluation.groundtruth import GroundTruthFile, read_groundtruth_file
 from photoshape_flow.imaging.io import load_label_map, load_rgb
 from photoshape_flow.networks.classifiers import load_material_classifier
+from photoshape_flow.recognition.bn_prior import PhotoCase, photo_cases
 from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
 from photoshape_flow.recognition.training import training_data
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
@@ -125,6 +126,31 @@ def validation_regions(
             yield number, ids, rgb, regions
 
 
+def photo_like_records(cases: list[PhotoCase], clf: Any, ev: Any, index: dict[int, int]) -> list[dict]:
+    """Records of validation renders made photo-like (degraded like exemplars, part maps misaligned as fine
+    alignment errs: `recognition.bn_prior.photo_cases`), the network run on each as on an exemplar."""
+    out = []
+    for number, case in enumerate(cases):
+        keep = [(mask, mid) for mask, mid in zip(case.masks, case.truth, strict=True) if mid in index]
+        if not keep:
+            continue
+        labels = np.zeros(case.image.shape[:2], np.int32)
+        for k, (mask, _) in enumerate(keep):
+            labels[mask] = k + 1
+        mat, sub = clf.predict(case.image, [mask for mask, _ in keep])
+        net = part_substances(labels, substance_map(ev.network, case.image, labels, ev.net_size),
+                              range(1, len(keep) + 1))
+        for k, ((mask, mid), part) in enumerate(zip(keep, net, strict=True)):
+            out.append({
+                "render": number, "fraction": float(mask.mean()), "truth": index[mid],
+                "true_substance": ev.material_substance[mid], "network": part.substance,
+                "network_probs": [float(part.probs.get(s, 0.0)) for s in SUBSTANCES],
+                "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
+                "lab": _lab(case.image, mask),
+            })
+    return out
+
+
 def _lab(rgb: np.ndarray, mask: np.ndarray) -> list[float] | None:
     lab = median_lab(rgb, mask)
     return None if lab is None else np.asarray(lab, np.float64).round(3).tolist()
@@ -134,6 +160,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("groundtruth", nargs="?", type=Path)
     parser.add_argument("--out", type=Path, help="default: <data root>/experiments/substance_ceiling/records.json")
+    parser.add_argument("--photo-like", type=int, default=0, metavar="N",
+                        help="also N validation renders made photo-like (records under 'photo_like')")
     args = parser.parse_args()
     settings = get_settings()
     out = args.out or results_dir(settings, "substance_ceiling") / "records.json"
@@ -161,6 +189,8 @@ def main() -> None:
                     "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
                     "lab": _lab(rgb, mask),
                 })
+        photo_like = (photo_like_records(photo_cases(session, store, settings, args.photo_like), clf, ev, index)
+                      if args.photo_like else [])
         names = {mat.id: mat.name for mat in session.execute(sa.select(m.Material)).scalars()}
         by_name = {name: mid for mid, name in names.items()}
         for ep in exemplar_pairs(session, store, gt):
@@ -196,6 +226,7 @@ def main() -> None:
         "material_substances": clf.material_substances, "labs": ev.labs.round(4).tolist(),
         "color_sigma": ev.sigma, "temperature": ev.temperature, "substance_network": ev.network_id,
         "min_region_fraction": min_fraction, "validation": validation, "exemplars": exemplars,
+        "photo_like": photo_like,
     }))
     print(f"{len(validation)} validation regions, {len(exemplars)} exemplar parts -> {out}")
 
