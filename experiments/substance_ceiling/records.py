@@ -126,28 +126,31 @@ def validation_regions(
             yield number, ids, rgb, regions
 
 
+def render_records(number: int, rgb: np.ndarray, labels: np.ndarray, regions: list[tuple[int, int, np.ndarray]],
+                   clf: Any, ev: Any, index: dict[int, int]) -> list[dict]:
+    """One record per region (its value in `labels`, true material id, mask) of one render, the substance
+    network run on the render and pooled over `labels` as the substances stage does on an exemplar."""
+    mat, sub = clf.predict(rgb, [mask for _, _, mask in regions])
+    net = part_substances(labels, substance_map(ev.network, rgb, labels, ev.net_size), [v for v, _, _ in regions])
+    return [{"render": number, "fraction": float(mask.mean()), "truth": index[mid],
+             "true_substance": ev.material_substance[mid], "network": part.substance,
+             "network_probs": [float(part.probs.get(s, 0.0)) for s in SUBSTANCES],
+             "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(), "lab": _lab(rgb, mask)}
+            for k, ((_, mid, mask), part) in enumerate(zip(regions, net, strict=True))]
+
+
 def photo_like_records(cases: list[PhotoCase], clf: Any, ev: Any, index: dict[int, int]) -> list[dict]:
     """Records of validation renders made photo-like (degraded like exemplars, part maps misaligned as fine
-    alignment errs: `recognition.bn_prior.photo_cases`), the network run on each as on an exemplar."""
+    alignment errs: `recognition.bn_prior.photo_cases`)."""
     out = []
     for number, case in enumerate(cases):
         keep = [(mask, mid) for mask, mid in zip(case.masks, case.truth, strict=True) if mid in index]
-        if not keep:
-            continue
         labels = np.zeros(case.image.shape[:2], np.int32)
         for k, (mask, _) in enumerate(keep):
             labels[mask] = k + 1
-        mat, sub = clf.predict(case.image, [mask for mask, _ in keep])
-        net = part_substances(labels, substance_map(ev.network, case.image, labels, ev.net_size),
-                              range(1, len(keep) + 1))
-        for k, ((mask, mid), part) in enumerate(zip(keep, net, strict=True)):
-            out.append({
-                "render": number, "fraction": float(mask.mean()), "truth": index[mid],
-                "true_substance": ev.material_substance[mid], "network": part.substance,
-                "network_probs": [float(part.probs.get(s, 0.0)) for s in SUBSTANCES],
-                "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
-                "lab": _lab(case.image, mask),
-            })
+        regions = [(k + 1, mid, mask) for k, (mask, mid) in enumerate(keep)]
+        if regions:
+            out += render_records(number, case.image, labels, regions, clf, ev, index)
     return out
 
 
@@ -179,16 +182,7 @@ def main() -> None:
         ev = load_evidence(session, store, settings, clf.materials)
         data = training_data(session, store)
         for number, ids, rgb, regions in validation_regions(data.val[:COLOR_SIGMA_RENDERS], index, min_fraction):
-            mat, sub = clf.predict(rgb, [mask for _, mask in regions])
-            net = part_substances(ids, substance_map(ev.network, rgb, ids, ev.net_size), [r[0] for r in regions])
-            for k, ((mid, mask), part) in enumerate(zip(regions, net, strict=True)):
-                validation.append({
-                    "render": number, "fraction": float(mask.mean()), "truth": index[mid],
-                    "true_substance": ev.material_substance[mid], "network": part.substance,
-                    "network_probs": [float(part.probs.get(s, 0.0)) for s in SUBSTANCES],
-                    "head": mat[k].round(6).tolist(), "head_substance": sub[k].round(6).tolist(),
-                    "lab": _lab(rgb, mask),
-                })
+            validation += render_records(number, rgb, ids, [(mid, mid, mask) for mid, mask in regions], clf, ev, index)
         photo_like = (photo_like_records(photo_cases(session, store, settings, args.photo_like), clf, ev, index)
                       if args.photo_like else [])
         names = {mat.id: mat.name for mat in session.execute(sa.select(m.Material)).scalars()}
