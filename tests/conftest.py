@@ -16,13 +16,13 @@ from typing import Any
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # Two workers share two cores: torch's (and BLAS's) OpenMP pool of one thread per core in each
     # worker oversubscribes them, and its spinning threads slow the other worker's tests (a 1.4 s
     # in-process training took 32 s). Set before any test imports torch; subprocesses inherit it.
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 
 
 @pytest.fixture

@@ -3,7 +3,7 @@
 Why: decoded textures are float32 (a 1024^2 RGB map is 12 MiB, a 256^2 one 0.75 MiB) and the fit
 re-renders every candidate material of every part, so the cache must hold a whole collection's
 maps at once or it thrashes: a 24-entry cache held six of a 15-material collection's four maps
-each and decoded 3,192 textures in one fit calibration (40 s of its 271 s). A count bound that
+each and decoded 3,192 textures in one fit calibration (42 s of its 271 s). A count bound that
 fits the demo would grow without limit on a collection of 2K scans; a byte bound does not.
 Thread-safe: Prefect may run tasks that render in threads of one process.
 """
