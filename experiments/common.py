@@ -1,6 +1,6 @@
 """What the experiments share: the ranking's evidence as inference fits it, and one region scorer.
 
-`load_evidence` gives the colour likelihood (sigma fit on the validation renders), the calibrated
+`load_evidence` gives the colour likelihood (colours and sigma as the training stage fits them), the calibrated
 substance network (its part-level temperature) and the material colours that inference uses, so the
 experiments score exactly what the pipeline ranks with. `region_hits` and `interval` score a classifier
 on labelled regions (validation renders made photo-like, or a world's photos through true masks) the
@@ -19,14 +19,13 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.classify.color_prior import fit_color_sigma, material_lab_matrix, region_color_distances
+from photoshape_flow.classify.color_prior import material_lab_matrix
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.networks.calibrations import material_lab
 from photoshape_flow.networks.classifiers import load_substance_network
-from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
+from photoshape_flow.recognition.calibration import fit_classifier_color_sigma
 from photoshape_flow.recognition.substance_temperature import substance_temperature
-from photoshape_flow.recognition.training import training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -80,8 +79,8 @@ def results_dir(settings: Settings, experiment: str) -> Path:
 @dataclass
 class Evidence:
     material_substance: dict[int, str]
-    labs: np.ndarray  # (M, 3) CIELAB of the classifier's materials, in its order (NaN: no colour)
-    sigma: float | None  # the colour likelihood's sigma, fit on the validation renders
+    labs: np.ndarray  # (M, 3) CIELAB of the classifier's materials as the ranking sees them (NaN: no colour)
+    sigma: float | None  # the colour likelihood's sigma, fit as the training stage fits it
     network_id: int  # the newest substance network behind the part substances
     temperature: float | None  # its part-level temperature
     network: Any  # the substance network itself (segmentation net, or the part recogniser's MaterialClassifier)
@@ -91,9 +90,8 @@ class Evidence:
 def load_evidence(session: Session, store: BlobStore, settings: Settings, materials_order: list[int]) -> Evidence:
     """The evidence inference would use, for a classifier whose materials are `materials_order`."""
     materials = session.execute(sa.select(m.Material)).scalars().all()
-    mat_labs = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
-    data = training_data(session, store)
-    sigma = fit_color_sigma(region_color_distances(data.val, mat_labs, limit=COLOR_SIGMA_RENDERS))
+    previews = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
+    mat_labs, sigma = fit_classifier_color_sigma(session, store, settings, previews)
     networks = session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars().all()
     newest = max(n for n in networks if n is not None)
     net_row = session.get(m.Classifier, newest)

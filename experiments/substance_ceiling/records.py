@@ -43,7 +43,6 @@ from photoshape_flow.evaluation.groundtruth import GroundTruthFile, read_groundt
 from photoshape_flow.imaging.io import load_label_map, load_rgb
 from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.recognition.bn_prior import PhotoCase, photo_cases
-from photoshape_flow.recognition.calibration import COLOR_SIGMA_RENDERS
 from photoshape_flow.recognition.training import training_data
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.scoring.truths import majority_label, merge_labels, truth_labels
@@ -51,6 +50,8 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 
 from ..common import load_evidence, results_dir
+
+VALIDATION_RENDERS = 400  # exact validation renders read for their regions
 
 # -- ground truth as `photoshape eval` reads it (the same rules as pipeline/evaluate.py) ----------------
 
@@ -181,7 +182,7 @@ def main() -> None:
     with session_scope() as session:
         ev = load_evidence(session, store, settings, clf.materials)
         data = training_data(session, store)
-        for number, ids, rgb, regions in validation_regions(data.val[:COLOR_SIGMA_RENDERS], index, min_fraction):
+        for number, ids, rgb, regions in validation_regions(data.val[:VALIDATION_RENDERS], index, min_fraction):
             validation += render_records(number, rgb, ids, [(mid, mid, mask) for mid, mask in regions], clf, ev, index)
         photo_like = (photo_like_records(photo_cases(session, store, settings, args.photo_like), clf, ev, index)
                       if args.photo_like else [])

@@ -1,4 +1,4 @@
-"""The colour likelihood that joins the classifier's ranking, and its sigma fit on validation renders."""
+"""The colour likelihood that joins the classifier's ranking, its material colours and its sigma."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from photoshape_flow.classify.color_prior import (
     fit_color_sigma,
     material_lab_matrix,
     region_color_distances,
+    rendered_material_labs,
 )
 from photoshape_flow.classify.dataset import RenderItem
 
@@ -66,3 +67,18 @@ def test_region_distances_measure_each_region_against_its_own_material(tmp_path:
     assert distances[2] > 10  # the darker red is far from the material's own colour
     assert len(region_color_distances([exact, darker], labs, limit=1)) == 2
     assert len(region_color_distances([exact], labs, min_fraction=0.5)) == 0  # regions too small
+
+
+def test_a_materials_colour_is_the_median_of_its_regions_in_the_renders(tmp_path: Path) -> None:
+    """Three renders show material 3 lit three ways: its colour is the middle one, whatever a preview said;
+    material 7, seen in one render only, is left to its preview (too few regions)."""
+    shades = [(180, 40, 40), (200, 30, 30), (230, 60, 50)]
+    items = [_render(tmp_path, f"r{k}", {3: shade, **({7: (90, 90, 90)} if k == 0 else {})})
+             for k, shade in enumerate(shades)]
+    items.append(RenderItem(tmp_path / "missing.png", tmp_path / "missing_ids.png", "gone"))  # unreadable: skipped
+    labs = rendered_material_labs(items)
+    assert set(labs) == {3}
+    expected = np.median([median_lab(np.array([[s]], np.uint8)) for s in shades], axis=0)
+    assert labs[3] == pytest.approx(expected)
+    assert set(rendered_material_labs(items, min_regions=1)) == {3, 7}
+    assert rendered_material_labs(items, min_fraction=0.5) == {}  # every region below the share: none

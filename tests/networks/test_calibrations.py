@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from photoshape_flow.networks.calibrations import Calibration
+from photoshape_flow.networks.calibrations import Calibration, fitted_labs
 
 # a material classifier's and a substance network's metrics as rows written before the record hold them
 MATERIAL_ROW = {
@@ -42,3 +42,11 @@ def test_store_writes_the_fields_given_and_keeps_the_rest() -> None:
     assert record == Calibration.of(row) and record.color_sigma == 3.0
     Calibration.store(row, color_sigma=None)  # "fitted, nothing came out" is stored too
     assert "color_sigma" in row.metrics and Calibration.of(row).color_sigma is None
+
+
+def test_the_colour_key_names_fitted_colours_only() -> None:
+    """Rows calibrated before material colours were fitted (D63) keep the keys of what ranks with them."""
+    assert Calibration.from_json(MATERIAL_ROW).colour_key == {}
+    fitted = Calibration.from_json({**MATERIAL_ROW, "color_labs": {"3": [50.0, 10.0, -4.0]}})
+    assert fitted.colour_key == {"colour": "k1"}
+    assert fitted_labs(fitted)[3].tolist() == [50.0, 10.0, -4.0] and fitted_labs(Calibration()) == {}

@@ -118,3 +118,43 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
 
     again = run_stage("fit", resolve_profile("tiny", ["fit.calibration_cases=3"]), ctx)
     assert again.done == 0  # the stored calibration is reused (same key), nothing re-fits or re-ranks
+
+
+def test_colour_evidence_is_fitted_on_the_renders_and_keys_what_ranks_with_it(
+        tiny_demo: Path, db_url: str, store: BlobStore) -> None:
+    """D63: each material's colour from the training split's renders, sigma from validation renders seen as photos;
+    stored on the classifier, read back by the ranking and named in the keys of what ranks with it."""
+    from tests.pipeline.test_fit import _plant_pairs
+
+    from photoshape_flow.config import get_settings
+    from photoshape_flow.networks.calibrations import Calibration, material_labs, stored_color_prior
+    from photoshape_flow.networks.validation_photos import exemplar_size
+    from photoshape_flow.recognition.calibration import fit_classifier_color_sigma, photo_color_distances
+    from photoshape_flow.recognition.training_renders import run_training_renders
+
+    _plant_pairs(tiny_demo, db_url, store)
+    run_training_renders("training", 16, 48, 4, val_fraction=0.5)
+    settings = get_settings()
+    with session_scope(db_url) as session:
+        row = session.execute(sa.select(m.Classifier)).scalar_one()
+        assert not Calibration.of(row).colour_key  # nothing fitted yet: older keys stay as they were
+        previews = material_labs(session, store, row.materials)
+        labs, sigma = fit_classifier_color_sigma(session, store, settings, previews, row)
+        distances = photo_color_distances(session, store, settings.seed, labs, exemplar_size(session))
+    assert len(distances) > 0 and sigma is not None and sigma >= 1.0
+    with session_scope(db_url) as session:
+        row = session.execute(sa.select(m.Classifier)).scalar_one()
+        record = Calibration.of(row)
+        assert record.color_sigma == pytest.approx(sigma) and record.colour_key == {"colour": record.color_sigma_key}
+        rendered = {int(k) for k in record.color_labs}
+        assert rendered and rendered <= set(previews)  # colours of materials the renders show often enough
+        for mid in rendered:
+            assert labs[mid] == pytest.approx(record.color_labs[str(mid)], abs=1e-3)
+            assert not np.allclose(labs[mid], previews[mid], atol=0.5)  # a preview is not how the renders show it
+        matrix, read_sigma = stored_color_prior(session, store, row.materials, row)
+        assert read_sigma == pytest.approx(sigma)
+        for i, mid in enumerate(row.materials):
+            if mid in labs:
+                assert matrix[i] == pytest.approx(labs[mid], abs=1e-3)
+        again = fit_classifier_color_sigma(session, store, settings, previews, row)  # cached: read back, same
+    assert again[1] == pytest.approx(sigma) and all(again[0][k] == pytest.approx(v, abs=1e-3) for k, v in labs.items())

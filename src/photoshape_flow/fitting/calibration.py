@@ -30,8 +30,9 @@ workers that start `fit` at once may both compute them: the result is determinis
 the same record. Reported with them: 2-fold cross-validated log-loss and top-1 (folds by render) of
 the hand-set cost, the hand-set cost with a fitted temperature, and the fitted cost.
 
-The sample of validation renders, the exemplars' size and the degradation (`validation_renders`,
-`exemplar_size`, `as_photo`) are `networks.validation_photos`'s, shared with the BatchNorm priors.
+The sample of validation renders, the exemplars' size and the photo (`validation_renders`,
+`exemplar_size`, `calibration_photo`) are `networks.validation_photos`'s, shared with the BatchNorm
+priors and the colour likelihood's sigma.
 """
 
 from __future__ import annotations
@@ -51,14 +52,13 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.devices import set_torch_threads
 from photoshape_flow.fit import calibrate as cal
 from photoshape_flow.fit.scene import FitScene, FrameRenderer, exposure_grid, profiled_terms, render_candidates
-from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
 from photoshape_flow.fitting.context import PairData
 from photoshape_flow.fitting.steps import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.networks.calibrations import Calibration
 from photoshape_flow.networks.classifiers import load_material_classifier
 from photoshape_flow.networks.evidence import stored_evidence
-from photoshape_flow.networks.validation_photos import as_photo, exemplar_size, validation_renders
+from photoshape_flow.networks.validation_photos import calibration_photo, exemplar_size, validation_renders
 from photoshape_flow.progress_sink import Progress, counted
 from photoshape_flow.render import Camera
 from photoshape_flow.synth.spec import RenderSpec
@@ -136,11 +136,8 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Set
     truth = spec.material_by_index()
     hdr, ids = ctx.store.load_image(row.blobs["hdr"]), ctx.store.load_image(row.blobs["part_ids"])
     ids = ids[..., 0] if ids.ndim == 3 else ids
-    if photo_size:
-        hdr, ids = resampled(hdr, ids, photo_size)
     rng = np.random.default_rng(item_seed(settings.seed, "fit-calibration", row.kind, row.key))
-    rgb, labels, foreground = frame(as_photo(hdr, ids, int(rng.integers(2**31 - 1))), ids, ctx.cfg.size)
-    labels = misalign(labels, sample_misalignment(rng, ctx.cfg.size))
+    rgb, labels, foreground = calibration_photo(hdr, ids, photo_size, ctx.cfg.size, rng)
     with session_scope(settings.resolved_database_url) as session:
         shape = session.get(m.Shape, row.shape_id)
         assert shape is not None
@@ -207,15 +204,15 @@ def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:
 def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int, photo_size: int | None = None) -> str:
     """What a stored calibration depends on (a change of any re-fits it).
 
-    The classifier's BatchNorm prior changes how it ranks the cases (`RenderRanker`); it enters only
-    when one is chosen, so calibrations of classifiers that read photos as trained keep their keys.
+    The classifier's BatchNorm prior and its colour evidence change how it ranks the cases
+    (`RenderRanker`); each enters only when set, so older calibrations keep their keys.
     """
-    prior = Calibration.of(ctx.classifier).bn_prior
+    record = Calibration.of(ctx.classifier)
     return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
                         "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed, "photo_size": photo_size,
                         "renders": [[r.kind, r.key, r.params_hash] for r in renders],
                         "materials": sorted(ctx.material_substance), "envmaps": sorted(ctx.envmaps.items()),
-                        **({} if prior is None else {"bn_prior": prior})})
+                        **({} if record.bn_prior is None else {"bn_prior": record.bn_prior}), **record.colour_key})
 
 
 def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering],

@@ -35,7 +35,8 @@ class Calibration:
     """A network's stored calibrations (None: not fitted); each `*_key` names what it was fitted on."""
 
     color_sigma: float | None = None  # the colour likelihood's sigma (CIELAB), a material classifier's
-    color_sigma_key: str | None = None
+    color_sigma_key: str | None = None  # also the key of `color_labs`: both are fitted together
+    color_labs: Mapping[str, Sequence[float]] | None = None  # material id -> CIELAB in the training renders
     part_temperature: float | None = None  # a substance network's part-level temperature
     part_temperature_key: str | None = None
     part_stats: Mapping[str, Any] = field(default_factory=dict)  # PART_STATS
@@ -56,6 +57,12 @@ class Calibration:
         if isinstance(self.fit, Mapping) and self.fit.get("key") == key:
             return True, self.fit.get("record")
         return False, None
+
+    @property
+    def colour_key(self) -> dict[str, str]:
+        """What the colour evidence was fitted on, for the keys of what ranks with it; empty for a classifier
+        calibrated before material colours were fitted, so its rows and calibrations keep their keys."""
+        return {} if self.color_labs is None or self.color_sigma_key is None else {"colour": self.color_sigma_key}
 
     @classmethod
     def from_json(cls, metrics: Mapping[str, Any] | None) -> Calibration:
@@ -135,9 +142,21 @@ def material_lab(material: m.Material, store: BlobStore) -> np.ndarray | None:
 def stored_color_prior(
     session: Session, store: BlobStore, materials: Sequence[int], classifier: m.Classifier
 ) -> tuple[np.ndarray, float] | None:
-    """(material colours in `materials` order, the classifier's stored sigma); None when not calibrated."""
-    sigma = Calibration.of(classifier).color_sigma
-    if sigma is None:
+    """(material colours in `materials` order, the classifier's stored sigma); None when not calibrated.
+
+    A material's colour is the one fitted with the sigma (`Calibration.color_labs`: its median colour
+    in the training renders), else its preview's (a material added since, or a classifier calibrated
+    before colours were fitted).
+    """
+    record = Calibration.of(classifier)
+    if record.color_sigma is None:
         return None
-    labs = material_labs(session, store, materials)
-    return (material_lab_matrix(materials, labs), sigma) if labs else None
+    wanted = {int(x) for x in materials}
+    labs = {mid: lab for mid, lab in {**material_labs(session, store, materials), **fitted_labs(record)}.items()
+            if mid in wanted}
+    return (material_lab_matrix(materials, labs), record.color_sigma) if labs else None
+
+
+def fitted_labs(record: Calibration) -> dict[int, np.ndarray]:
+    """The material colours stored with the colour sigma, by material id (empty when none are)."""
+    return {int(k): np.asarray(v, np.float64) for k, v in (record.color_labs or {}).items()}

@@ -1,8 +1,9 @@
 """Validation renders made to look like exemplars: the sample, the exemplars' size, the degradation.
 
-Both calibrations that read photo-like validation renders use these: the BatchNorm priors
-(`recognition.bn_prior`, chosen by the substances and training stages) and the fit's weights
-(`fitting.calibration`). They sit below both, so neither stage imports the other's code.
+The calibrations that read photo-like validation renders use these: the BatchNorm priors
+(`recognition.bn_prior`, chosen by the substances and training stages), the colour likelihood's
+sigma (`recognition.calibration`) and the fit's weights (`fitting.calibration`); the last two see
+the same photo (`calibration_photo`). They sit below every stage, so no stage imports another's code.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import sqlalchemy as sa
 
 from photoshape_flow.db import models as m
 from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
+from photoshape_flow.fit.validation import frame, misalign, resampled, sample_misalignment
 from photoshape_flow.hashing import item_seed
 from photoshape_flow.vocab import STATUS_OK
 
@@ -48,3 +50,18 @@ def as_photo(hdr: np.ndarray, part_ids: np.ndarray, seed: int) -> np.ndarray:
     image = degrade(premultiplied, covered, params)
     decoded = cv2.imdecode(np.frombuffer(encode_jpeg(image, params["jpeg_quality"]), np.uint8), cv2.IMREAD_COLOR)
     return np.ascontiguousarray(decoded[..., ::-1])
+
+
+def calibration_photo(hdr: np.ndarray, part_ids: np.ndarray, photo_size: int | None, frame_size: int,
+                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(RGB, part ids, foreground) of a validation render seen as the pipeline sees an exemplar.
+
+    Resampled to `photo_size` (None: the render's own), degraded there (`as_photo`), framed to the
+    silhouette's square at `frame_size` (`fit.validation.frame`) and its part map misaligned as fine
+    alignment errs (`fit.validation.misalign`); `rng` (seeded by the caller from the render's key)
+    draws the degradation, then the misalignment.
+    """
+    if photo_size:
+        hdr, part_ids = resampled(hdr, part_ids, photo_size)
+    rgb, labels, foreground = frame(as_photo(hdr, part_ids, int(rng.integers(2**31 - 1))), part_ids, frame_size)
+    return rgb, misalign(labels, sample_misalignment(rng, frame_size)), foreground

@@ -28,51 +28,97 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from photoshape_flow.classify.color_prior import fit_color_sigma, region_color_distances
+from photoshape_flow.classify.color_prior import (
+    fit_color_sigma,
+    region_color_distances,
+    region_labs,
+    rendered_material_labs,
+)
 from photoshape_flow.classify.dataset import frame_object
 from photoshape_flow.classify.evidence import ClassifierEvidence
 from photoshape_flow.classify.reliability import reliability
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.hashing import stable_hash
+from photoshape_flow.hashing import item_seed, stable_hash
 from photoshape_flow.imaging.io import load_label_map, load_rgb
-from photoshape_flow.networks.calibrations import Calibration, material_labs
+from photoshape_flow.networks.calibrations import Calibration, fitted_labs, material_labs
 from photoshape_flow.networks.classifiers import load_material_classifier, substance_networks
 from photoshape_flow.networks.evidence import stored_evidence
+from photoshape_flow.networks.validation_photos import calibration_photo, exemplar_size, validation_renders
 from photoshape_flow.recognition.bn_prior import choose_bn_prior
 from photoshape_flow.recognition.substance_temperature import substance_temperature
 from photoshape_flow.recognition.training import training_data
 from photoshape_flow.store import BlobStore, default_store
+from photoshape_flow.synth.spec import RenderSpec
 
 log = logging.getLogger(__name__)
 
-COLOR_SIGMA_RENDERS = 400  # validation renders read to fit the colour likelihood's sigma
+COLOR_SIGMA_RENDERS = 200  # validation renders, seen as photos, that fit the colour likelihood's sigma
+COLOR_LAB_RENDERS = 400  # training renders read for each material's colour
 POSTERIOR_RENDERS = 200  # validation renders whose regions measure the posterior's reliability
 
 
 def fit_classifier_color_sigma(
-    session: Session, store: BlobStore, material_labs: dict[int, np.ndarray],
+    session: Session, store: BlobStore, settings: Settings, material_labs: dict[int, np.ndarray],
     classifier: m.Classifier | None = None,
-) -> float | None:
-    """sigma of the colour likelihood from the validation renders (None when there are none).
+) -> tuple[dict[int, np.ndarray], float | None]:
+    """(material colours, sigma) of the colour likelihood; sigma None when no validation render has a region.
 
-    With `classifier`, the fit is cached in its `metrics` (`color_sigma`, keyed by the validation
-    renders and the material colours), so `photoshape retrieve` and later inference runs do not
-    re-read hundreds of renders; the caller's session commits it.
+    The colours are `color_prior.rendered_material_labs` over the training split's renders, the
+    preview's (`material_labs`) where a material has too few regions there; sigma is fit on the
+    distances of validation renders seen as the pipeline sees a photo (`calibration_photo`: at the
+    exemplars' size, degraded, framed, misaligned), so it measures what a photo's part does (D63).
+    With `classifier`, both are cached in its `metrics` (`color_labs`, `color_sigma`, keyed by the
+    renders, the preview colours, the seed and the exemplars' size), so `photoshape retrieve` and later
+    inference runs do not re-read hundreds of renders; the caller's session commits it.
     """
     data = training_data(session, store)
-    key = stable_hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS,
+    size = exemplar_size(session)
+    key = stable_hash({"renders": data.hash, "limit": COLOR_SIGMA_RENDERS, "colours": COLOR_LAB_RENDERS,
+                       "scheme": "rendered colours, photo-like sigma", "seed": settings.seed, "size": size,
                        "labs": {str(k): np.round(v, 3).tolist() for k, v in sorted(material_labs.items())}})
     stored = Calibration.of(classifier)
     if classifier is not None and stored.color_sigma_key == key:
-        return stored.color_sigma
-    sigma = fit_color_sigma(region_color_distances(data.val, material_labs, limit=COLOR_SIGMA_RENDERS))
-    log.info("colour likelihood sigma %s (CIELAB, fit on %d validation renders)",
-             f"{sigma:.2f}" if sigma else "none", min(len(data.val), COLOR_SIGMA_RENDERS))
+        return {**material_labs, **fitted_labs(stored)}, stored.color_sigma
+    rendered = {mid: lab for mid, lab in rendered_material_labs(data.train, limit=COLOR_LAB_RENDERS).items()
+                if mid in material_labs}
+    labs = {**material_labs, **rendered}
+    distances = photo_color_distances(session, store, settings.seed, labs, size)
+    if not len(distances):  # renders kept without their HDR and spec (toy or imported sets): read as stored
+        distances = region_color_distances(data.val, labs, limit=COLOR_SIGMA_RENDERS)
+    sigma = fit_color_sigma(distances)
+    log.info("colour likelihood: %d of %d material colours from the training renders, sigma %s (CIELAB, fit on "
+             "%d validation renders seen as photos)", len(rendered), len(labs),
+             f"{sigma:.2f}" if sigma else "none", COLOR_SIGMA_RENDERS)
     if classifier is not None:
-        Calibration.store(classifier, color_sigma=sigma, color_sigma_key=key)
-    return sigma
+        Calibration.store(classifier, color_sigma=sigma, color_sigma_key=key,
+                          color_labs={str(k): np.round(v, 3).tolist() for k, v in sorted(rendered.items())})
+    return labs, sigma
+
+
+def photo_color_distances(session: Session, store: BlobStore, seed: int, labs: dict[int, np.ndarray],
+                          size: int | None, limit: int = COLOR_SIGMA_RENDERS) -> np.ndarray:
+    """CIE76 distance of each part of a sample of validation renders, seen as photos, from its material's colour.
+
+    The renders are `validation_renders`' sample; each becomes `calibration_photo` at the exemplars'
+    size (seeded by its key), and each misaligned part of at least the classifier's smallest region
+    whose true material has a colour gives one distance.
+    """
+    distances: list[float] = []
+    for row in validation_renders(session, limit, seed):
+        truth = RenderSpec.from_dict(row.params).material_by_index()
+        try:
+            hdr, ids = store.load_image(row.blobs["hdr"]), store.load_image(row.blobs["part_ids"])
+        except (OSError, ValueError) as exc:
+            log.warning("%s/%s: %s; not used for the colour sigma", row.kind, row.key, exc)
+            continue
+        ids = ids[..., 0] if ids.ndim == 3 else ids
+        rng = np.random.default_rng(item_seed(seed, "colour-sigma", row.kind, row.key))
+        rgb, labels, _ = calibration_photo(hdr, ids, size, size or max(ids.shape), rng)
+        distances += [float(np.linalg.norm(lab - labs[truth[value]])) for value, lab in region_labs(rgb, labels)
+                      if truth.get(value) in labs]
+    return np.asarray(distances, np.float64)
 
 
 def calibrate(settings: Settings, classifier_id: int, store: BlobStore | None = None) -> dict[str, Any]:
@@ -83,7 +129,7 @@ def calibrate(settings: Settings, classifier_id: int, store: BlobStore | None = 
         if classifier is None:
             raise LookupError(f"no classifier with id {classifier_id}")
         labs = material_labs(session, store, [int(x) for x in classifier.materials if int(x) != 0])
-        sigma = fit_classifier_color_sigma(session, store, labs, classifier) if labs else None
+        sigma = fit_classifier_color_sigma(session, store, settings, labs, classifier)[1] if labs else None
         networks = substance_networks(session)
     temperatures = {str(n): substance_temperature(settings, n, store) for n in networks}
     bn_prior = choose_bn_prior(settings, classifier_id, store=store)

@@ -81,11 +81,13 @@ class RankingContext:
         self.classifier = classifier
         self.model = None
         self.bn_prior: float | None = None
+        self.colour_key: dict[str, str] = {}
         if method == "classifier":
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
             set_torch_threads(settings.torch_threads)
             self.bn_prior = Calibration.of(classifier).bn_prior
+            self.colour_key = Calibration.of(classifier).colour_key
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device,
                                          bn_prior=self.bn_prior)
         self.material_labs: dict[int, np.ndarray] = {}
@@ -125,6 +127,7 @@ class RankingContext:
                                        for k, v in sorted(self.substance_temperatures.items())},
             # only when chosen: rows ranked without adaptation keep their hashes
             **({} if self.bn_prior is None else {"bn_prior": self.bn_prior}),
+            **self.colour_key,
         }
 
     def substance_weights(self, view: PartSubstanceView) -> np.ndarray:
