@@ -24,7 +24,7 @@ from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
 from photoshape_flow.networks.calibrations import material_lab
 from photoshape_flow.networks.classifiers import load_substance_network
-from photoshape_flow.recognition.calibration import fit_classifier_color_sigma
+from photoshape_flow.recognition.calibration import fit_color_evidence
 from photoshape_flow.recognition.substance_temperature import substance_temperature
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
@@ -91,7 +91,7 @@ def load_evidence(session: Session, store: BlobStore, settings: Settings, materi
     """The evidence inference would use, for a classifier whose materials are `materials_order`."""
     materials = session.execute(sa.select(m.Material)).scalars().all()
     previews = {mat.id: lab for mat in materials if (lab := material_lab(mat, store)) is not None}
-    mat_labs, sigma = fit_classifier_color_sigma(session, store, settings, previews)
+    mat_labs, sigma = fit_color_evidence(session, store, settings, previews)
     networks = session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars().all()
     newest = max(n for n in networks if n is not None)
     net_row = session.get(m.Classifier, newest)

@@ -93,7 +93,7 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
     if held.get("cases"):
         assert held[record["model"]]["log_loss"] == min(held[model]["log_loss"] for model in MODELS)
     if record["model"] != "fitted":
-        hand_set = resolve_profile("tiny").fit
+        hand_set = resolve_profile("tiny").profile.fit
         assert record["weights"]["prior"] / record["weights"]["color"] == pytest.approx(
             hand_set.prior_weight / hand_set.color_weight, rel=1e-3)
 
@@ -129,7 +129,7 @@ def test_colour_evidence_is_fitted_on_the_renders_and_keys_what_ranks_with_it(
     from photoshape_flow.config import get_settings
     from photoshape_flow.networks.calibrations import Calibration, material_labs, stored_color_prior
     from photoshape_flow.networks.validation_photos import exemplar_size
-    from photoshape_flow.recognition.calibration import fit_classifier_color_sigma, photo_color_distances
+    from photoshape_flow.recognition.calibration import fit_color_evidence, photo_color_distances
     from photoshape_flow.recognition.training_renders import run_training_renders
 
     _plant_pairs(tiny_demo, db_url, store)
@@ -139,7 +139,7 @@ def test_colour_evidence_is_fitted_on_the_renders_and_keys_what_ranks_with_it(
         row = session.execute(sa.select(m.Classifier)).scalar_one()
         assert not Calibration.of(row).colour_key  # nothing fitted yet: older keys stay as they were
         previews = material_labs(session, store, row.materials)
-        labs, sigma = fit_classifier_color_sigma(session, store, settings, previews, row)
+        labs, sigma = fit_color_evidence(session, store, settings, previews, row)
         distances = photo_color_distances(session, store, settings.seed, labs, exemplar_size(session))
     assert len(distances) > 0 and sigma is not None and sigma >= 1.0
     with session_scope(db_url) as session:
@@ -156,5 +156,5 @@ def test_colour_evidence_is_fitted_on_the_renders_and_keys_what_ranks_with_it(
         for i, mid in enumerate(row.materials):
             if mid in labs:
                 assert matrix[i] == pytest.approx(labs[mid], abs=1e-3)
-        again = fit_classifier_color_sigma(session, store, settings, previews, row)  # cached: read back, same
+        again = fit_color_evidence(session, store, settings, previews, row)  # cached: read back, same
     assert again[1] == pytest.approx(sigma) and all(again[0][k] == pytest.approx(v, abs=1e-3) for k, v in labs.items())

@@ -1,10 +1,12 @@
 """Calibrations of the ranking's evidence, fitted before inference and stored on each network's row.
 
-Two numbers make the product of experts in `classify.ranking` weigh its experts right:
+Two calibrations make the product of experts in `classify.ranking` weigh its experts right:
 
-- the colour likelihood's sigma (how far lighting, UV scale and shading move a material's median
-  colour), fit by robust maximum likelihood on the validation training renders, cached in the
-  material classifier's `metrics` (`color_sigma`, keyed by those renders and the material colours);
+- the colour likelihood's material colours (each material's median colour in the training renders)
+  and its sigma (how far lighting, UV scale, shading and a photo's imaging move a part's median
+  colour), fit by robust maximum likelihood on validation renders seen as photos (D63), cached in
+  the material classifier's `metrics` (`color_labs`, `color_sigma`, keyed by the renders, the preview
+  colours, the seed and the exemplars' size);
 - each substance network's part-level temperature (`recognition.substance_temperature`),
   fit on the validation renders of both rounds and cached in that network's `metrics`.
 
@@ -59,7 +61,7 @@ COLOR_LAB_RENDERS = 400  # training renders read for each material's colour
 POSTERIOR_RENDERS = 200  # validation renders whose regions measure the posterior's reliability
 
 
-def fit_classifier_color_sigma(
+def fit_color_evidence(
     session: Session, store: BlobStore, settings: Settings, material_labs: dict[int, np.ndarray],
     classifier: m.Classifier | None = None,
 ) -> tuple[dict[int, np.ndarray], float | None]:
@@ -102,8 +104,8 @@ def photo_color_distances(session: Session, store: BlobStore, seed: int, labs: d
     """CIE76 distance of each part of a sample of validation renders, seen as photos, from its material's colour.
 
     The renders are `validation_renders`' sample; each becomes `calibration_photo` at the exemplars'
-    size (seeded by its key), and each misaligned part of at least the classifier's smallest region
-    whose true material has a colour gives one distance.
+    size (seeded by its key), and each misaligned part of at least 0.5% of the photo (the classifier's
+    default smallest region) whose true material has a colour gives one distance.
     """
     distances: list[float] = []
     for row in validation_renders(session, limit, seed):
@@ -129,7 +131,7 @@ def calibrate(settings: Settings, classifier_id: int, store: BlobStore | None = 
         if classifier is None:
             raise LookupError(f"no classifier with id {classifier_id}")
         labs = material_labs(session, store, [int(x) for x in classifier.materials if int(x) != 0])
-        sigma = fit_classifier_color_sigma(session, store, settings, labs, classifier)[1] if labs else None
+        sigma = fit_color_evidence(session, store, settings, labs, classifier)[1] if labs else None
         networks = substance_networks(session)
     temperatures = {str(n): substance_temperature(settings, n, store) for n in networks}
     bn_prior = choose_bn_prior(settings, classifier_id, store=store)
