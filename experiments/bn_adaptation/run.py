@@ -5,7 +5,7 @@
 `classify.bn_adapt` mixes every BatchNorm layer's training statistics with the input photo's
 (the training set counts as N samples, the photo as one). Here N is chosen the way the fit's
 weights are: on the collection's validation renders (val shapes, val envmaps, library materials),
-each degraded like an exemplar at the exemplars' size (`fit_calibration.as_photo`) with its part
+each degraded like an exemplar at the exemplars' size (`networks.validation_photos.as_photo`) with its part
 map misaligned as fine alignment errs, never on exemplars or evaluation worlds. For each prior:
 per region the material head's top-1 and top-5 over the enabled materials, the log-loss of the
 true material, the substance head's top-1 and the substance network's part-level top-1 (its own

@@ -61,6 +61,7 @@ from photoshape_flow.fitting.context import FitContext, PairData
 from photoshape_flow.fitting.fit import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed
 from photoshape_flow.networks.classifier_rows import resolve_classifier
+from photoshape_flow.networks.validation_photos import as_photo
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.render import Camera, EnvmapSpec, UVTransform
 from photoshape_flow.render.specs import linear_to_srgb
@@ -136,7 +137,7 @@ NEUTRAL = {"exposure": 1.0, "white_balance": [1.0, 1.0, 1.0], "background": 1.0,
 
 
 def partly_degraded(hdr: np.ndarray, ids: np.ndarray, seed: int, keep: set[str]) -> np.ndarray:
-    """`fit_calibration.as_photo` with only the `keep` parts of its degradation (the same draws)."""
+    """`validation_photos.as_photo` with only the `keep` parts of its degradation (the same draws)."""
     import cv2
 
     from photoshape_flow.demo.exemplars import degrade, encode_jpeg, sample_degradation
@@ -202,7 +203,7 @@ class Oracle:
         if photo_kind.startswith("deg:"):
             photo = partly_degraded(hdr, ids, seed, set(photo_kind[4:].split("+")))
         else:
-            photo = fc.as_photo(hdr, ids, seed) if photo_kind == "deg" else clean_photo(hdr, ids)
+            photo = as_photo(hdr, ids, seed) if photo_kind == "deg" else clean_photo(hdr, ids)
         rgb, labels, foreground = frame(photo, ids, self.cfg.size)
         error = sample_misalignment(rng, self.cfg.size)
         labels = misalign(labels, error) if mask == "mis" else labels

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from experiments.fit_oracle.run import DEGRADATION_PARTS, clean_photo, partly_degraded
 
-from photoshape_flow.fitting.calibration import as_photo
+from photoshape_flow.networks.validation_photos import as_photo
 
 
 def _render() -> tuple[np.ndarray, np.ndarray]:
