@@ -28,6 +28,7 @@ import sqlalchemy as sa
 from skimage import color
 
 from photoshape_flow.classify.assignment import median_lab
+from photoshape_flow.classify.color_prior import rendered_material_labs
 from photoshape_flow.classify.dataset import frame_object
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
@@ -39,8 +40,9 @@ from photoshape_flow.hashing import item_seed
 from photoshape_flow.imaging.hdr import read_hdr
 from photoshape_flow.imaging.io import load_label_map, load_rgb
 from photoshape_flow.networks.calibrations import material_labs
-from photoshape_flow.networks.validation_photos import as_photo, exemplar_size, validation_renders
+from photoshape_flow.networks.validation_photos import as_photo, calibration_photo, exemplar_size, validation_renders
 from photoshape_flow.recognition.bn_prior import clean_photo
+from photoshape_flow.recognition.calibration import COLOR_LAB_RENDERS
 from photoshape_flow.recognition.training import training_data
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
@@ -49,6 +51,7 @@ from ..common import results_dir
 from .records import exemplar_pairs, exemplar_truths
 
 MIN_FRACTION = 0.005  # the classifier's smallest training region, as a share of the image
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass(frozen=True)
@@ -67,9 +70,6 @@ def envmap_tint(hdr: np.ndarray) -> np.ndarray:
     weights = np.cos((np.arange(rgb.shape[0]) + 0.5) / rgb.shape[0] * np.pi - np.pi / 2)
     mean = (rgb * weights[:, None, None]).sum((0, 1)) / (weights.sum() * rgb.shape[1])
     return mean / float(mean @ LUMINANCE)
-
-
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def relit(lab: np.ndarray, gains: np.ndarray) -> np.ndarray:
@@ -120,19 +120,19 @@ def summary(rows: list[Region], references: Callable[[str], dict[int, np.ndarray
 
 def ladder(hdr: np.ndarray, ids: np.ndarray, size: int, seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """(image, part ids) of one validation render at each imaging step, from the training image to the photo."""
-    rng = np.random.default_rng(seed)
+    photo, misaligned, _ = calibration_photo(hdr, ids, size, size, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)  # the same draws again, for the steps in between
     degrade_seed = int(rng.integers(2**31 - 1))
     error = sample_misalignment(rng, size)
     big_hdr, big_ids = resampled(hdr, ids, size)
     framed_clean, framed_ids, _ = frame(clean_photo(big_hdr, big_ids), big_ids, size)
-    framed_photo, _, _ = frame(as_photo(big_hdr, big_ids, degrade_seed), big_ids, size)
-    unframed_photo = as_photo(big_hdr, big_ids, degrade_seed)
     return {
         "1 render size, clean, exact parts": (clean_photo(hdr, ids), ids),
         "2 framed at the exemplar size, clean": (framed_clean, framed_ids),
-        "3 framed, degraded like an exemplar": (framed_photo, framed_ids),
-        "4 framed, degraded, misaligned (fit calibration)": (framed_photo, misalign(framed_ids, error)),
-        "5 unframed, degraded, misaligned (BatchNorm prior, D62)": (unframed_photo, misalign(big_ids, error)),
+        "3 framed, degraded like an exemplar": (photo, framed_ids),
+        "4 framed, degraded, misaligned (fit calibration)": (photo, misaligned),
+        "5 unframed, degraded, misaligned (BatchNorm prior, D62)": (as_photo(big_hdr, big_ids, degrade_seed),
+                                                                    misalign(big_ids, error)),
     }
 
 
@@ -189,17 +189,6 @@ def exemplar_steps(session: Any, store: BlobStore, known: set[int], gt: GroundTr
     return {"exemplars, ground-truth masks": truth_masks, "exemplars, aligned part maps": aligned}
 
 
-def training_render_colours(session: Any, store: BlobStore, known: set[int], count: int = 400
-                            ) -> dict[int, np.ndarray]:
-    """Each material's median colour over its regions in the training split's stored images (all training lights)."""
-    found: dict[int, list[np.ndarray]] = {}
-    for item in training_data(session, store).train[:count]:
-        ids, rgb = load_label_map(item.material_map), load_rgb(item.image)
-        for r in regions(rgb, ids, {int(v): int(v) for v in np.unique(ids)}, known, ""):
-            found.setdefault(r.material, []).append(r.lab)
-    return {mid: np.median(np.stack(v), axis=0) for mid, v in found.items()}
-
-
 def light_tints(session: Any, store: BlobStore, gt_path: Path) -> tuple[dict[str, np.ndarray], str, list[str]]:
     """Tint of every light (ingested envmaps and the ground truth's), the preview light, the training lights."""
     rows = session.execute(sa.select(m.Envmap).where(m.Envmap.blob.is_not(None))
@@ -223,7 +212,7 @@ def main() -> None:
         labs = material_labs(session, store, enabled)
         known = set(labs)
         tints, preview, training_lights = light_tints(session, store, gt_path)
-        rendered = training_render_colours(session, store, known)
+        rendered = rendered_material_labs(training_data(session, store).train, limit=COLOR_LAB_RENDERS)
         light_of = {f"{r.kind}/{r.key}": envmap for r, envmap in _render_lights(session)}
         steps = {"0 stored training images (the colour sigma's data)":
                      stored_training_images(session, store, 400, known, light_of),

@@ -151,9 +151,10 @@ def stored_color_prior(
     record = Calibration.of(classifier)
     if record.color_sigma is None:
         return None
+    fitted = fitted_labs(record)
     wanted = {int(x) for x in materials}
-    labs = {mid: lab for mid, lab in {**material_labs(session, store, materials), **fitted_labs(record)}.items()
-            if mid in wanted}
+    labs = {**material_labs(session, store, sorted(wanted - set(fitted))),  # previews only where none was fitted
+            **{mid: lab for mid, lab in fitted.items() if mid in wanted}}
     return (material_lab_matrix(materials, labs), record.color_sigma) if labs else None
 
 

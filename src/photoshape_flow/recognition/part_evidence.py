@@ -86,8 +86,8 @@ class RankingContext:
             if classifier is None or not classifier.checkpoint_blob:
                 raise ValueError("no trained material classifier: run the training stage first")
             set_torch_threads(settings.torch_threads)
-            self.bn_prior = Calibration.of(classifier).bn_prior
-            self.colour_key = Calibration.of(classifier).colour_key
+            record = Calibration.of(classifier)
+            self.bn_prior, self.colour_key = record.bn_prior, record.colour_key
             self.model = load_classifier(store.read_bytes(classifier.checkpoint_blob), device=settings.device,
                                          bn_prior=self.bn_prior)
         self.material_labs: dict[int, np.ndarray] = {}
