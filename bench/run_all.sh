@@ -11,6 +11,7 @@ mkdir -p bench/results
 run() { local name=$1; shift; echo "== $name: $*"; /usr/bin/time -v "$PY" "$@" > "bench/results/$name.log" 2>&1 \
   || { echo "$name failed (see bench/results/$name.log)"; return 1; }; tail -n 40 "bench/results/$name.log"; }
 run render bench/render.py
+run frozen_render bench/frozen_render.py
 run hog_channels bench/hog_channels.py --size medium --demo "$DEMO"
 run retrieval bench/retrieval.py
 run fine_alignment bench/fine_alignment.py

@@ -7,6 +7,7 @@ a few bootstrap-round renders, half of them validation renders, as the calibrati
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 
@@ -121,7 +122,7 @@ def test_fitted_weights_are_stored_used_and_hashed(tiny_demo: Path, db_url: str,
 
 
 def test_colour_evidence_is_fitted_on_the_renders_and_keys_what_ranks_with_it(
-        tiny_demo: Path, db_url: str, store: BlobStore) -> None:
+        tiny_demo: Path, db_url: str, store: BlobStore, caplog: pytest.LogCaptureFixture) -> None:
     """D63: each material's colour from the training split's renders, sigma from validation renders seen as photos;
     stored on the classifier, read back by the ranking and named in the keys of what ranks with it."""
     from tests.pipeline.test_fit import _plant_pairs
@@ -139,9 +140,12 @@ def test_colour_evidence_is_fitted_on_the_renders_and_keys_what_ranks_with_it(
         row = session.execute(sa.select(m.Classifier)).scalar_one()
         assert not Calibration.of(row).colour_key  # nothing fitted yet: older keys stay as they were
         previews = material_labs(session, store, row.materials)
-        labs, sigma = fit_color_evidence(session, store, settings, previews, row)
+        with caplog.at_level(logging.INFO, logger="photoshape_flow.recognition.calibration"):
+            labs, sigma = fit_color_evidence(session, store, settings, previews, row)
         distances = photo_color_distances(session, store, settings.seed, labs, exemplar_size(session))
     assert len(distances) > 0 and sigma is not None and sigma >= 1.0
+    # the log names what sigma was fit on (these renders keep their HDR: photos, not the stored images)
+    assert f"fit on {len(distances)} part distances in validation renders seen as photos" in caplog.text
     with session_scope(db_url) as session:
         row = session.execute(sa.select(m.Classifier)).scalar_one()
         record = Calibration.of(row)

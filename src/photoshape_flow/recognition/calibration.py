@@ -87,12 +87,14 @@ def fit_color_evidence(
                 if mid in material_labs}
     labs = {**material_labs, **rendered}
     distances = photo_color_distances(session, store, settings.seed, labs, size)
+    source = "validation renders seen as photos"
     if not len(distances):  # renders kept without their HDR and spec (toy or imported sets): read as stored
         distances = region_color_distances(data.val, labs, limit=COLOR_SIGMA_RENDERS)
+        source = "stored validation images (no HDR kept to make photos of)"
     sigma = fit_color_sigma(distances)
     log.info("colour likelihood: %d of %d material colours from the training renders, sigma %s (CIELAB, fit on "
-             "%d validation renders seen as photos)", len(rendered), len(labs),
-             f"{sigma:.2f}" if sigma else "none", COLOR_SIGMA_RENDERS)
+             "%d part distances in %s)", len(rendered), len(labs), f"{sigma:.2f}" if sigma else "none",
+             len(distances), source)
     if classifier is not None:
         Calibration.store(classifier, color_sigma=sigma, color_sigma_key=key,
                           color_labs={str(k): np.round(v, 3).tolist() for k, v in sorted(rendered.items())})
