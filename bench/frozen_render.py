@@ -12,17 +12,17 @@ scene (`mi.render` on the pool's scene right after it).
 The generated sequence is the fit's pattern per pair (`fit.scene`): a shape is rendered `LIGHTS`
 times with the same materials under envmap rotations (the lighting search), then `CANDIDATES` times
 with other materials per part (the candidate slots: other textures, texture sizes and UV scales).
-Two recording keys are measured: the pool's geometry upload only (Embree's scene changes only then),
-and the geometry or any part's UVs (a material's scale rewrites the part's UVs).
+Three recording keys are measured: the pool's geometry upload only (Embree's scene changes only
+then), the geometry or any part's UVs (a material's scale rewrites the part's UVs), and the pool's
+own (`BeautyPool.render`: any upload of meshes, UVs, textures or envmap pixels re-records).
 
 ``--fit-data-root DIR`` checks the fit stage's own renders instead (on a copy of a data root that
 went through inference): that is where replays went wrong. Measured 2026-11-28 (Dr.Jit 1.5.0,
 Mitsuba 3.9.1, small demo): the generated sequence replays faithfully (0 of 132 renders differ,
 worst 1.8e-7) at 56-72 ms against 88-92 ms traced, but of the fit stage's first 600 renders 90
-differ from their traced render (some not finite) when keyed on geometry and 1 (by 2.8, the same
-render at both calibration blurs) when UV rewrites re-record too: a replay reads some input
-the recording did not route through the scene's traversal. So `render.pool` keeps tracing
-(docs/benchmarks.md).
+differ from their traced render (some not finite) when keyed on geometry, 1 (by 2.8, the same
+render at both calibration blurs) when UV rewrites re-record too, and 0 of 900 (worst 9.5e-7)
+when any texture or envmap upload re-records as well: `render.pool`'s key (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -115,13 +115,14 @@ def sequence(shapes: int, materials: list[Any], envmaps: list[Any], rng: np.rand
 
 
 def run(items: list[dict], mode: str, check: bool, limit: int = 4) -> dict[str, Any]:
-    """Render `items` traced (``mode="traced"``) or frozen under a key (``geometry`` or ``geometry+uv``);
+    """Render `items` traced (``mode="traced"``), as `BeautyPool.render` does (``pool``), or frozen under a
+    key of this bench (``geometry`` or ``geometry+uv``);
     with `check`, compare each frozen render with a traced render of the same scene."""
     import drjit as dr
     import mitsuba as mi
 
     from photoshape_flow.render.factory import default_renderer
-    from photoshape_flow.render.pool import beauty_pool
+    from photoshape_flow.render.pool import _frozen_render, beauty_pool
     from photoshape_flow.render.scene import SceneOptions
 
     renderer = default_renderer()
@@ -141,6 +142,8 @@ def run(items: list[dict], mode: str, check: bool, limit: int = 4) -> dict[str, 
         start = time.perf_counter()
         if mode == "traced":
             image = np.array(mi.render(pool.scene, spp=SPP, seed=0), dtype=np.float32)
+        elif mode == "pool":
+            image = pool.render(SPP, 0)
         else:
             image = np.array(frozen(pool.scene, (item["shape"], uvs)), dtype=np.float32)
         seconds += time.perf_counter() - start
@@ -152,7 +155,7 @@ def run(items: list[dict], mode: str, check: bool, limit: int = 4) -> dict[str, 
     out = {"mode": mode, "renders": len(items), "ms_per_render": round(1000 * seconds / len(items), 1)}
     if check and mode != "traced":
         out.update(mismatched=mismatched, worst_abs_error=worst,
-                   recordings=int(getattr(frozen, "n_recordings", -1)))
+                   recordings=int((_frozen_render() if mode == "pool" else frozen).n_recordings))
     return out
 
 
@@ -160,51 +163,32 @@ class _Enough(BaseException):
     """Stops the fit stage once enough renders are checked (not an Exception: the stage would go on)."""
 
 
-def check_fit_stage(data_root: Path, renders: int, limit: int, key: str) -> dict[str, Any]:
-    """Run the fit stage on `data_root` (a copy: it writes fit rows) with every beauty render frozen
-    (keyed on geometry uploads, and UV rewrites with ``key="geometry+uv"``) and checked against a
-    traced render of the same scene; stop after `renders` renders."""
+def check_fit_stage(data_root: Path, renders: int) -> dict[str, Any]:
+    """Run the fit stage on `data_root` (a copy: it writes fit rows) and check each of its frozen
+    renders (`BeautyPool.render`, the pool's own key) against a traced render of the same scene;
+    stop after `renders` renders."""
     import os
 
-    import drjit as dr
     import mitsuba as mi
 
     from photoshape_flow.render import pool as pool_module
 
     os.environ["PHOTOSHAPE_DATA_ROOT"] = str(data_root)
-    traced_render = mi.render
-    state = {"version": 0, "renders": 0, "mismatched": 0, "worst": 0.0}
-    apply = pool_module.BeautyPool._apply
+    state = {"renders": 0, "mismatched": 0, "worst": 0.0}
+    frozen_render = pool_module.BeautyPool.render
 
-    def counting_apply(self: Any, wanted: dict, *args: Any) -> None:
-        watched = (".geometry", ".vertex_texcoords") if key == "geometry+uv" else (".geometry",)
-        if any((name.endswith(watched) or name == "floor.vertex_positions")
-               and not (name in self._applied and pool_module._same(self._applied[name], pool_module._marker(v)))
-               for name, v in wanted.items()):
-            state["version"] += 1
-        apply(self, wanted, *args)
-
-    @dr.freeze(limit=limit, warn_after=1 << 30)
-    def frozen(scene: Any, key: tuple) -> Any:
-        return traced_render(scene, spp=key[-2], seed=key[-1])
-
-    def checked(scene: Any, params: Any = None, **kwargs: Any) -> Any:
-        if params is not None or "integrator" in kwargs:  # gradient renders: not frozen here
-            return traced_render(scene, params, **kwargs)
-        spp, seed = int(kwargs.get("spp", 0)), int(kwargs.get("seed", 0))
-        size = int(scene.sensors()[0].film().size()[0])
-        image = np.array(frozen(scene, (state["version"], size, spp, seed)), dtype=np.float32)
-        traced = np.array(traced_render(scene, spp=spp, seed=seed), dtype=np.float32)
+    def checked(self: Any, spp: int, seed: int) -> np.ndarray:
+        image = frozen_render(self, spp, seed)
+        traced = np.array(mi.render(self.scene, spp=int(spp), seed=int(seed)), dtype=np.float32)
         error = float(np.abs(image - traced).max()) if np.isfinite(image).all() else math.inf
         state["renders"] += 1
         state["worst"] = max(state["worst"], error)
         state["mismatched"] += error > 1e-4 * max(1.0, float(traced.max()))
         if state["renders"] >= renders:
             raise _Enough
-        return mi.TensorXf(image)
+        return image
 
-    pool_module.BeautyPool._apply = counting_apply
-    mi.render = checked
+    pool_module.BeautyPool.render = checked
     from photoshape_flow.cli import main as cli
 
     sys.argv = ["photoshape", "run", "fit", "--profile", "small"]
@@ -212,22 +196,20 @@ def check_fit_stage(data_root: Path, renders: int, limit: int, key: str) -> dict
         cli()
     except (_Enough, SystemExit):
         pass
-    return {"mode": f"fit stage, {key}", "renders": state["renders"], "mismatched": state["mismatched"],
-            "worst_abs_error": state["worst"], "limit": limit}
+    return {"mode": "fit stage, render.pool's key", "renders": state["renders"], "mismatched": state["mismatched"],
+            "worst_abs_error": state["worst"], "recordings": int(pool_module._frozen_render().n_recordings)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--shapes", type=int, default=6)
-    parser.add_argument("--limit", type=int, default=4, help="recordings `dr.freeze` keeps")
+    parser.add_argument("--limit", type=int, default=4, help="recordings `dr.freeze` keeps (generated sequence)")
     parser.add_argument("--fit-data-root", type=Path, help="a copy of a data root that went through "
                         "inference (the small demo's): check the fit stage's own renders instead")
     parser.add_argument("--renders", type=int, default=900, help="with --fit-data-root: renders to check")
-    parser.add_argument("--key", choices=("geometry", "geometry+uv"), default="geometry+uv",
-                        help="with --fit-data-root: what re-records")
     args = parser.parse_args()
     if args.fit_data_root is not None:
-        print(json.dumps(check_fit_stage(args.fit_data_root, args.renders, args.limit, args.key)))
+        print(json.dumps(check_fit_stage(args.fit_data_root, args.renders)))
         return
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory() as tmp:
@@ -236,7 +218,8 @@ def main() -> None:
         run(items[:LIGHTS + CANDIDATES], "traced", check=False)  # warm the compiled kernels
         rows = [run(items, "traced", check=False), run(items, "geometry", False, args.limit),
                 run(items, "geometry+uv", False, args.limit),
-                run(items, "geometry", True, args.limit), run(items, "geometry+uv", True, args.limit)]
+                run(items, "geometry", True, args.limit), run(items, "geometry+uv", True, args.limit),
+                run(items, "pool", False), run(items, "pool", True)]
     report = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
               "date": time.strftime("%Y-%m-%d %H:%M"), "size": SIZE, "spp": SPP,
               "limit": args.limit, "rows": rows}

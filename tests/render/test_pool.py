@@ -114,6 +114,54 @@ def test_pool_render_equals_fresh_scene(renderer, tmp_path: Path) -> None:  # ty
         assert np.allclose(pooled.alpha, np.clip(image[..., 3], 0, 1), atol=1e-4)
 
 
+def test_frozen_renders_equal_traced_ones(renderer, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """`BeautyPool.render` replays recorded kernels where only the camera, the envmap's turn and
+    strength or the film changed, and records anew after any upload (meshes, UVs, textures, envmap
+    pixels). Over a sequence that turns the light on one shape, swaps materials, changes sizes and
+    the floor, runs exact passes and frees Mitsuba objects in between, and comes back to an earlier
+    shape, every frozen render equals a traced render of the same scene to float rounding."""
+    import mitsuba as mi
+
+    from photoshape_flow.render.pool import beauty_pool
+    from photoshape_flow.render.scene import SceneOptions
+
+    gc.collect()  # other tests' objects freed now, not mid-sequence
+    rng = np.random.default_rng(2)
+    sky = write_exr(tmp_path / "e.exr", rng.uniform(0.1, 3.0, (16, 32, 3)).astype(np.float32))
+    other = write_exr(tmp_path / "f.exr", rng.uniform(0.1, 3.0, (16, 32, 3)).astype(np.float32))
+    tex = write_png(tmp_path / "t.png", rng.integers(0, 255, (16, 16, 3), dtype=np.uint8))
+    shapes = [boxes(5, seed=20), boxes(3, seed=21)]
+    palette = [MaterialSpec("t", maps={"albedo": tex}, scale=0.2), MaterialSpec("u", maps={"albedo": tex}, scale=0.35),
+               MaterialSpec("c", params={"albedo": [0.8, 0.2, 0.1], "roughness": 0.3}),
+               MaterialSpec("d", params={"albedo": [0.1, 0.5, 0.9], "metallic": 1.0, "roughness": 0.2})]
+    # (shape, envmap, turn, material offset, size, floor): light turns and camera moves replay
+    sequence = [(0, sky, 0.0, 0, 24, False), (0, sky, 1.5, 0, 24, False), (0, sky, 3.0, 0, 24, False),
+                (0, other, 0.5, 0, 24, False), (0, other, 0.5, 1, 24, False), (0, other, 2.0, 1, 24, False),
+                (1, sky, 0.0, 2, 32, False), (1, sky, 1.0, 2, 32, False), (0, sky, 0.0, 0, 24, True),
+                (0, sky, 1.0, 0, 24, True), (0, sky, 2.0, 3, 24, False), (0, sky, 2.5, 3, 24, False)]
+    versions = []
+    for k, (which, envmap, turn, offset, size, floor) in enumerate(sequence):
+        shape = shapes[which]
+        materials = renderer.resolve_materials(shape, [palette[(i + offset) % 4] for i in range(len(shape.parts))])
+        options = SceneOptions(size=size, spp=4, max_depth=renderer.max_depth, floor=floor,
+                               max_texture_size=renderer.max_texture_size)
+        pool = beauty_pool(len(shape.parts), options.max_depth, renderer.envmap_resolution)
+        camera = Camera(0.3 * k, 0.2, 1.8, 50.0)
+        pool.prepare(shape, materials, EnvmapSpec(envmap, 1.0 + 0.2 * k, turn), camera, options)
+        versions.append(pool.version)
+        frozen = pool.render(4, 1)
+        traced = np.array(mi.render(pool.scene, spp=4, seed=1), dtype=np.float32)
+        assert frozen.shape == traced.shape == (size, size, 4) and traced.max() > 0.0
+        assert np.isfinite(frozen).all()
+        assert np.abs(frozen - traced).max() <= 1e-5 * max(1.0, float(traced.max())), (k, np.abs(frozen - traced).max())
+        renderer.part_ids(shape, camera, size)  # exact passes between renders
+        if k == 4:
+            gc.collect()  # Mitsuba objects freed between a recording and its replay
+    assert versions[1] == versions[0] and versions[2] == versions[0]  # the light turned: a replay
+    assert versions[3] != versions[2] and versions[4] != versions[3]  # other envmap pixels, other materials
+    assert versions[9] == versions[8] and versions[11] == versions[10]
+
+
 def test_envmap_data_matches_mitsuba_and_resamples(renderer, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     import mitsuba as mi
 

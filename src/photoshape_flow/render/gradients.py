@@ -81,6 +81,7 @@ class GradientScene:
                 self.params[key] = base
             if self._base:
                 self.params.update()
+            self.pool.invalidate()  # its textures were rewritten here, not by `prepare`
         finally:
             self._base = {}
             self._lock.release()

@@ -27,11 +27,26 @@ Unused slots and the floor when it is off hold one degenerate triangle (zero are
 ``envmap=None`` is an envmap of constant radiance 1: the constant white sky, with other noise. Cost:
 Dr.Jit traces every live instance on every render (a cache hit still traces), ~5 ms per slot at 2
 threads, so the pool's size matters: after a 10-part shape every render carries 12 slots.
+
+Tracing is about half of a small render's time (a 9-part shape at 120 px and 8 spp: ~90 ms traced,
+~40 ms replayed), so `BeautyPool.render` freezes it (`dr.freeze`): the first render of a
+configuration is traced and recorded (dearer than a plain trace: the training and bootstrap
+renders, one per configuration, take 10-19% longer), later ones replay the recorded kernels on
+the scene's new camera, envmap rotation and scale and scalars (the small demo: 892 -> 816 s; tracing
+a configuration's first render plainly and recording its second ran 878 s). A replay reads
+some inputs from the recording rather than the scene (measured with `bench/frozen_render.py` on
+the fit stage's own renders: a freed Embree scene after a mesh upload, the old UVs after a UV
+rewrite, one wrong render after texture changes alone), so any upload of meshes, UVs, textures or
+envmap pixels starts a new configuration (`version`), and the film size, spp and seed are part of
+the key. What replays: a shape under other lights (the fit's lighting search), other cameras
+(publish's views), the same materials again. Frozen and traced renders agree to float rounding,
+not bit for bit (tests/render/test_pool.py).
 """
 
 from __future__ import annotations
 
 import gc
+import itertools
 import math
 import weakref
 from collections.abc import Sequence
@@ -61,6 +76,8 @@ MIN_SLOTS = 4
 FLOOR_HALF_SIZE = 20.0  # as `scene.floor_shape`: a rectangle scaled by 20
 FLOOR_UVS = [[0, 1], [0, 0], [1, 0], [1, 1]]  # the rectangle's: u along +x, v along -z
 _UNUSED = MaterialSpec("unused")
+FROZEN_CONFIGURATIONS = 4  # recordings `dr.freeze` keeps (least recently used dropped)
+_VERSIONS = itertools.count(1)  # process-wide, so a new pool never reuses an old pool's keys
 
 
 def slot_count(parts: int) -> int:
@@ -191,6 +208,17 @@ class BeautyPool:
         self._applied: dict[str, Any] = {}
         self._shape_ref: weakref.ref | None = None
         self._geometry = 0  # bumped whenever the slots' meshes change (their UVs depend on them)
+        self.version = next(_VERSIONS)  # bumped on every upload of meshes, UVs or pixels: frozen renders' key
+
+    def invalidate(self) -> None:
+        """Start a new frozen configuration: for writers of `params` other than `prepare`
+        (`render.gradients.GradientScene`), whose uploads a replay would not see (module doc)."""
+        self.version = next(_VERSIONS)
+
+    def render(self, spp: int, seed: int) -> np.ndarray:
+        """(H, W, 4) float32 premultiplied RGBA of the scene as `prepare` left it, frozen (module doc)."""
+        state = (self.version, int(self._applied.get("sensor.film.size", 0)), int(spp), int(seed))
+        return np.array(_frozen_render()(self.scene, state), dtype=np.float32)
 
     # -- one render --------------------------------------------------------------------------
     def prepare(
@@ -265,7 +293,7 @@ class BeautyPool:
         jitters: Sequence[Any] | None,
     ) -> None:
         mi, dr, params, applied = self.mi, self.dr, self.params, self._applied
-        moved = False
+        moved = uploaded = False
         for name, value in wanted.items():
             marker = _marker(value)
             if name in applied and _same(applied[name], marker):
@@ -298,7 +326,10 @@ class BeautyPool:
                 params[name] = dr.opaque(mi.Float, value)
             applied[name] = marker
             moved |= name.endswith(".geometry") or name == "floor.vertex_positions"
+            uploaded |= moved or name.endswith((".vertex_texcoords", ".data"))
         params.update()
+        if uploaded:  # a replay would read the previous upload (module doc)
+            self.invalidate()
         if moved:
             # Mitsuba 3.9 tells the envmap the scene's bounds before it recomputes them: without this,
             # its bounding sphere stays the previous shape's (too small: shadow rays stop short)
@@ -312,6 +343,20 @@ class BeautyPool:
         params[f"{key}.faces"] = mi.UInt32(aligned(part.faces, np.uint32).ravel())
         if uvs is not None:
             params[f"{key}.vertex_texcoords"] = mi.Float(aligned(uvs).ravel())
+
+
+@lru_cache(maxsize=1)
+def _frozen_render() -> Any:
+    """`mi.render` under `dr.freeze`, keyed by `state` (version, film size, spp, seed): plain ints, so a
+    new value re-traces (module doc)."""
+    mi = ensure_mitsuba()
+    import drjit as dr
+
+    def render(scene: Any, state: tuple[int, int, int, int]) -> Any:
+        return mi.render(scene, spp=state[2], seed=state[3])
+
+    # a new configuration per material or shape is the design, not a misuse: no warning
+    return dr.freeze(render, limit=FROZEN_CONFIGURATIONS, warn_after=1 << 30)
 
 
 _POOLS: dict[tuple[str, int, tuple[int, int]], BeautyPool] = {}

@@ -42,7 +42,7 @@ import numpy as np
 
 from photoshape_flow.geometry.mesh import ShapeMesh
 from photoshape_flow.render.camera import Camera
-from photoshape_flow.render.pool import ENVMAP_RESOLUTION, beauty_pool
+from photoshape_flow.render.pool import ENVMAP_RESOLUTION, BeautyPool, beauty_pool
 from photoshape_flow.render.raycast import RayCaster, caster_for
 from photoshape_flow.render.runtime import ensure_mitsuba
 from photoshape_flow.render.scene import SceneOptions, build_scene, part_index_from_key
@@ -168,8 +168,7 @@ class Renderer:
         )
         resolved = self.resolve_materials(shape, materials)
         with _RENDER_LOCK:
-            scene = self._beauty_scene(shape, resolved, envmap, camera, options)
-            image = np.array(self.mi.render(scene, spp=spp, seed=seed), dtype=np.float32)
+            image = self._beauty_pool(shape, resolved, envmap, camera, options).render(spp, seed)
         premultiplied, alpha = image[..., :3], image[..., 3]
         hdr, srgb = composite(premultiplied, alpha, background)
         return BeautyResult(
@@ -180,17 +179,18 @@ class Renderer:
             seconds=time.perf_counter() - start,
         )
 
-    def _beauty_scene(
+    def _beauty_pool(
         self,
         shape: ShapeMesh,
         materials: list[MaterialSpec],
         envmap: EnvmapSpec | None,
         camera: Camera,
         options: SceneOptions,
-    ) -> Any:
+    ) -> BeautyPool:
         """The process's beauty pool (grown to the shape's part count) set up for this render."""
         pool = beauty_pool(len(shape.parts), options.max_depth, self.envmap_resolution)
-        return pool.prepare(shape, materials, envmap, camera, options)
+        pool.prepare(shape, materials, envmap, camera, options)
+        return pool
 
     # -- exact passes ----------------------------------------------------------------------
     def _caster(self, shape: ShapeMesh) -> RayCaster:
