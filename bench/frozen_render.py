@@ -177,8 +177,8 @@ def check_fit_stage(data_root: Path, renders: int) -> dict[str, Any]:
     state = {"renders": 0, "mismatched": 0, "worst": 0.0}
     frozen_render = pool_module.BeautyPool.render
 
-    def checked(self: Any, spp: int, seed: int) -> np.ndarray:
-        image = frozen_render(self, spp, seed)
+    def checked(self: Any, spp: int, seed: int, record: bool = True) -> np.ndarray:
+        image = frozen_render(self, spp, seed, record)
         traced = np.array(mi.render(self.scene, spp=int(spp), seed=int(seed)), dtype=np.float32)
         error = float(np.abs(image - traced).max()) if np.isfinite(image).all() else math.inf
         state["renders"] += 1

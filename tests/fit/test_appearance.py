@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Weights, appearance, distance, erode, terms, to_lab
+from photoshape_flow.fit.appearance import Region, Weights, appearance, distance, erode, terms, to_lab
 from photoshape_flow.fit.candidates import Candidate, RankedRow, part_candidates
 from photoshape_flow.fit.select import rank_candidates, render_slots, scores_of
 
@@ -63,6 +63,27 @@ def test_gradient_statistics_separate_texture_from_a_flat_region_of_the_same_mea
     only_gradient = Weights(color=0.0, contrast=0.0, gradient=1.0)
     assert distance(a, b, only_mean) < 0.5 * distance(a, b, only_gradient)
     assert a.gradient[0] > 5 * b.gradient[0] + 1
+
+
+def test_a_region_derived_once_reads_every_image_as_its_mask_does() -> None:
+    """The fit derives a frame's regions once (`Region.of`) and reads every candidate render and
+    exposure in them: each image's statistics equal those read through the plain mask, on odd-sized
+    frames and on a sliver whose half-size mask is empty."""
+    rng = np.random.default_rng(3)
+    blob = np.zeros((37, 41), bool)
+    blob[5:30, 7:33] = rng.random((25, 26)) < 0.9
+    sliver = np.zeros((37, 41), bool)
+    sliver[11, 3:39] = True  # one row: half-size nearest-neighbour sampling misses it
+    for mask in (blob, sliver):
+        region = Region.of(mask)
+        assert sliver is not mask or region.coarse is None
+        for _ in range(3):
+            lab = to_lab(rng.integers(0, 255, (37, 41, 3), dtype=np.uint8))
+            a, b = appearance(lab, region), appearance(lab, mask)
+            assert a is not None and b is not None
+            assert all(np.array_equal(x, y) for x, y in zip((a.lab_mean, a.lab_std, a.gradient, a.highlight),
+                                                             (b.lab_mean, b.lab_std, b.gradient, b.highlight),
+                                                             strict=True))
 
 
 def test_small_regions_have_no_statistics_and_erosion_keeps_something() -> None:

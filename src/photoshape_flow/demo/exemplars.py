@@ -252,7 +252,8 @@ def render_exemplar(
     ]
     envmap = EnvmapSpec(envmap_path, scale=plan.envmap["scale"], rotation=plan.envmap["rotation"])
     result = renderer.beauty(
-        shape, materials, camera, envmap, size=plan.size, spp=plan.spp, background="transparent", seed=plan.render_seed
+        shape, materials, camera, envmap, size=plan.size, spp=plan.spp, background="transparent", seed=plan.render_seed,
+        record=False,  # one render per photo, each its own seed: nothing to replay
     )
     image = degrade(result.hdr, result.alpha, plan.degradation)
     mask = renderer.part_ids(shape, camera, size=plan.size)

@@ -101,22 +101,43 @@ def _gradient_magnitude(lightness: np.ndarray) -> np.ndarray:
     return np.sqrt(gx * gx + gy * gy)
 
 
-def appearance(lab: np.ndarray, mask: np.ndarray) -> Appearance | None:
+@dataclass(frozen=True)
+class Region:
+    """A region's mask and the masks `appearance` derives from it alone: its gradient pixels at full
+    and half resolution. A frame's part regions are the same for every candidate render and exposure
+    the fit measures, so they are derived once (`Region.of`) and read for each."""
+
+    mask: np.ndarray  # bool
+    pixels: int
+    fine: np.ndarray  # the mask shrunk by a pixel: where its full-resolution gradients are read
+    coarse: np.ndarray | None  # the same at half resolution; None when the half-size mask is empty
+
+    @classmethod
+    def of(cls, mask: np.ndarray) -> Region:
+        mask = np.asarray(mask, bool)
+        height, width = mask.shape
+        half = cv2.resize(mask.astype(np.uint8), (max(1, width // 2), max(1, height // 2)),
+                          interpolation=cv2.INTER_NEAREST) > 0
+        return cls(mask, int(mask.sum()), erode(mask, 1), erode(half, 1) if half.any() else None)
+
+
+def appearance(lab: np.ndarray, mask: np.ndarray | Region) -> Appearance | None:
     """Statistics of the region `mask` of a CIELAB image (`to_lab`); None when it is too small."""
-    mask = np.asarray(mask, bool)
-    n = int(mask.sum())
-    if n < MIN_PIXELS:
+    region = mask if isinstance(mask, Region) else Region.of(mask)
+    if region.pixels < MIN_PIXELS:
         return None
+    mask = region.mask
+    n = region.pixels
     pixels = lab[mask].astype(np.float64)
     lightness = np.ascontiguousarray(lab[..., 0], np.float32)
     # outside the region the gradient would see the background edge: fill it with the region's mean
     filled = np.where(mask, lightness, np.float32(pixels[:, 0].mean()))
-    fine = _gradient_magnitude(filled)[erode(mask, 1)]
-    half = cv2.resize(filled, (max(1, filled.shape[1] // 2), max(1, filled.shape[0] // 2)),
-                      interpolation=cv2.INTER_AREA)
-    half_mask = cv2.resize(mask.astype(np.uint8), (half.shape[1], half.shape[0]),
-                           interpolation=cv2.INTER_NEAREST) > 0
-    coarse = _gradient_magnitude(half)[erode(half_mask, 1)] if half_mask.any() else fine
+    fine = _gradient_magnitude(filled)[region.fine]
+    if region.coarse is None:
+        coarse = fine
+    else:
+        half = cv2.resize(filled, (region.coarse.shape[1], region.coarse.shape[0]), interpolation=cv2.INTER_AREA)
+        coarse = _gradient_magnitude(half)[region.coarse]
     coarse = coarse if coarse.size else fine
     gradient = np.array([fine.mean(), fine.std(), coarse.mean(), coarse.std()], np.float64)
     p50, p90, p99 = np.percentile(pixels[:, 0], [50.0, 90.0, 99.0])

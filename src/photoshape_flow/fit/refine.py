@@ -40,7 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from photoshape_flow.fit.appearance import Weights, appearance, distance, erode
+from photoshape_flow.fit.appearance import Region, Weights, appearance, distance, erode
 from photoshape_flow.render.specs import Refinement
 
 TEXTURED = ("albedo", "roughness", "normal")  # maps whose placement the UV transform moves
@@ -164,7 +164,7 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
     if not textured:
         return {}
     ids = frame.part_ids(scene.mesh, scene.camera)
-    regions = {i: erode(ids == i, settings.erode) for i in textured}
+    regions = {i: Region.of(erode(ids == i, settings.erode)) for i in textured}
     photo_lab = scene.photo_lab
     photo_orientation = {i: orientation(photo_lab, scene.masks[i]) for i in textured}
     weights = Weights(color=0.0, contrast=0.5, gradient=1.0, highlight=0.0)  # placement only: texture terms
@@ -181,7 +181,7 @@ def uv_search(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequence[
             rendered = appearance(lab, regions[i])
             if rendered is not None:
                 costs[i][point] = distance(rendered, scene.photo_stats[i], weights) + settings.orientation_weight * (
-                    float(np.linalg.norm(orientation(lab, regions[i]) - photo_orientation[i])))
+                    float(np.linalg.norm(orientation(lab, regions[i].mask) - photo_orientation[i])))
 
     # coordinate search: every scale unrotated, then every rotation at each part's best scale
     for scale in settings.uv_scales:

@@ -19,7 +19,17 @@ import numpy as np
 
 from photoshape_flow.align.partmap import resize_labels, zoom_to_fit
 from photoshape_flow.fit import lighting as lt
-from photoshape_flow.fit.appearance import Appearance, Weights, appearance, erode, soften, terms, to_lab, weigh
+from photoshape_flow.fit.appearance import (
+    Appearance,
+    Region,
+    Weights,
+    appearance,
+    erode,
+    soften,
+    terms,
+    to_lab,
+    weigh,
+)
 from photoshape_flow.fit.candidates import Candidate
 from photoshape_flow.fit.deep_texture import deep_stats
 from photoshape_flow.fit.select import rank_candidates, render_slots
@@ -176,26 +186,31 @@ def with_deep(stats: Appearance, maps: Sequence[np.ndarray] | None, mask: np.nda
     return stats if maps is None else replace(stats, deep=deep_stats(maps, mask))
 
 
-def region_terms(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appearance], indices: Sequence[int],
-                 erode_pixels: int = 1, maps: Sequence[np.ndarray] | None = None) -> dict[int, np.ndarray | None]:
+def part_regions(ids: np.ndarray, indices: Sequence[int], erode_pixels: int = 1) -> dict[int, Region]:
+    """Part index -> its region in a frame's part map, eroded (what every render of the frame is read in)."""
+    return {i: Region.of(erode(ids == i, erode_pixels)) for i in indices}
+
+
+def region_terms(lab: np.ndarray, regions: Mapping[int, Region], photo: Mapping[int, Appearance],
+                 indices: Sequence[int], maps: Sequence[np.ndarray] | None = None) -> dict[int, np.ndarray | None]:
     """Per part: the distance terms of its rendered region to its photo region (None when either is missing).
 
-    `maps`: the render's backbone feature maps (`FitScene.deep_maps`), for the deep term.
+    `regions`: the frame's `part_regions`; `maps`: the render's backbone feature maps
+    (`FitScene.deep_maps`), for the deep term.
     """
     out: dict[int, np.ndarray | None] = {}
     for index in indices:
-        mask = erode(ids == index, erode_pixels)
-        rendered = appearance(lab, mask)
+        region = regions[index]
+        rendered = appearance(lab, region)
         out[index] = (None if rendered is None or index not in photo
-                      else terms(with_deep(rendered, maps, mask), photo[index]))
+                      else terms(with_deep(rendered, maps, region.mask), photo[index]))
     return out
 
 
-def region_distances(lab: np.ndarray, ids: np.ndarray, photo: Mapping[int, Appearance], indices: Sequence[int],
-                     weights: Weights, erode_pixels: int = 1) -> dict[int, float | None]:
+def region_distances(lab: np.ndarray, regions: Mapping[int, Region], photo: Mapping[int, Appearance],
+                     indices: Sequence[int], weights: Weights) -> dict[int, float | None]:
     """Per part: distance of its rendered region to its photo region (None when either is missing)."""
-    return {i: None if t is None else weigh(t, weights)
-            for i, t in region_terms(lab, ids, photo, indices, erode_pixels).items()}
+    return {i: None if t is None else weigh(t, weights) for i, t in region_terms(lab, regions, photo, indices).items()}
 
 
 def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[Any],
@@ -213,13 +228,13 @@ def score_lighting(frame: FrameRenderer, scene: FitScene, materials: Sequence[An
     ids = frame.part_ids(scene.mesh, scene.camera)
     photo = scene.photo_stats
     photo_means = lt.region_means(scene.photo_linear, scene.masks)
-    rendered_masks = {i: erode(ids == i, erode_pixels) for i in scene.masks}
+    regions = part_regions(ids, sorted(scene.masks), erode_pixels)
+    rendered_masks = {i: region.mask for i, region in regions.items()}
     scored = []
     for hypothesis, envmap in hypotheses:
         rgba = scene.render(frame, materials, envmap)
         scale = lt.exposure(lt.region_means(rgba[..., :3], rendered_masks), photo_means)
-        dists = region_distances(scene.exposed_lab(rgba, scale), ids, photo, sorted(scene.masks), weights,
-                                 erode_pixels)
+        dists = region_distances(scene.exposed_lab(rgba, scale), regions, photo, sorted(scene.masks), weights)
         sizes = {i: float(scene.masks[i].sum()) for i, d in dists.items() if d is not None}
         loss = sum(sizes[i] * float(dists[i] or 0.0) for i in sizes) / sum(sizes.values()) if sizes else math.inf
         scored.append((hypothesis, scale, loss))
@@ -287,20 +302,22 @@ def render_candidates(frame: FrameRenderer, scene: FitScene, base: Mapping[int, 
 
 
 def candidate_terms(renders: CandidateRenders, scene: FitScene, exposure: float, erode_pixels: int = 1,
-                    maps: Sequence[Sequence[np.ndarray] | None] | None = None
-                    ) -> dict[int, dict[int, np.ndarray | None]]:
+                    maps: Sequence[Sequence[np.ndarray] | None] | None = None,
+                    regions: Mapping[int, Region] | None = None) -> dict[int, dict[int, np.ndarray | None]]:
     """Part index -> {candidate material: its distance terms to the photo} with the renders at `exposure`.
 
-    `maps`: each render's backbone feature maps (`FitScene.deep_maps`), for the deep term.
+    `maps`: each render's backbone feature maps (`FitScene.deep_maps`), for the deep term; `regions`:
+    the frame's `part_regions` when the caller measures the same renders again (other exposures).
     """
     photo = scene.photo_stats
+    regions = regions if regions is not None else part_regions(renders.ids, sorted(renders.where), erode_pixels)
     out: dict[int, dict[int, np.ndarray | None]] = {i: {} for i in renders.where}
     for k, rgba in enumerate(renders.renders):
         shown = {i: mid for i, by in renders.where.items() for mid, at in by.items() if at == k}
         if not shown:
             continue
         lab = scene.exposed_lab(rgba, exposure)
-        for index, value in region_terms(lab, renders.ids, photo, sorted(shown), erode_pixels,
+        for index, value in region_terms(lab, regions, photo, sorted(shown),
                                          None if maps is None else maps[k]).items():
             out[index][shown[index]] = value
     return out
@@ -344,7 +361,8 @@ def profiled_terms(renders: CandidateRenders, scene: FitScene, candidates: Mappi
     """
     trials = [exposure * (float(f) if np.ndim(f) == 0 else np.asarray(f, np.float64)) for f in grid]
     maps = None if scene.features is None else [scene.deep_maps(rgba, exposure) for rgba in renders.renders]
-    measured = [candidate_terms(renders, scene, e, erode_pixels, maps) for e in trials]
+    regions = part_regions(renders.ids, sorted(renders.where), erode_pixels)
+    measured = [candidate_terms(renders, scene, e, erode_pixels, maps, regions) for e in trials]
     parts = [i for i in candidates if candidates[i]]
     costs: list[dict[int, dict[int, float]]] = []
     for terms_at in measured:

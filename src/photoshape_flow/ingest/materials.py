@@ -315,7 +315,8 @@ def render_material_previews(
                 params=dict(material.params or {}),
                 scale=float(material.default_scale),
             )
-            result = renderer.beauty(sphere, [spec], camera, env, size=size, spp=spp, background="white")
+            result = renderer.beauty(sphere, [spec], camera, env, size=size, spp=spp, background="white",
+                                     record=False)  # one render per material: nothing to replay
             ref = store.put_image(result.srgb, "png")
         except Exception as exc:  # one material's failure must not stop the others
             logger.warning("material %s: preview failed: %s", material.name, one_line(exc))

@@ -30,8 +30,9 @@ threads, so the pool's size matters: after a 10-part shape every render carries 
 
 Tracing is about half of a small render's time (a 9-part shape at 120 px and 8 spp: ~90 ms traced,
 ~40 ms replayed), so `BeautyPool.render` freezes it (`dr.freeze`): the first render of a
-configuration is traced and recorded (dearer than a plain trace: the training and bootstrap
-renders, one per configuration, take 10-19% longer), later ones replay the recorded kernels on
+configuration is traced and recorded (dearer than a plain trace where nothing replays: callers
+whose every render is its own scene and seed, such as the training and bootstrap renders, pass
+`record=False`, which saves them 10-19%), later ones replay the recorded kernels on
 the scene's new camera, envmap rotation and scale and scalars (the small demo: 892 -> 816 s; tracing
 a configuration's first render plainly and recording its second ran 878 s). A replay reads
 some inputs from the recording rather than the scene (measured with `bench/frozen_render.py` on
@@ -215,8 +216,15 @@ class BeautyPool:
         (`render.gradients.GradientScene`), whose uploads a replay would not see (module doc)."""
         self.version = next(_VERSIONS)
 
-    def render(self, spp: int, seed: int) -> np.ndarray:
-        """(H, W, 4) float32 premultiplied RGBA of the scene as `prepare` left it, frozen (module doc)."""
+    def render(self, spp: int, seed: int, record: bool = True) -> np.ndarray:
+        """(H, W, 4) float32 premultiplied RGBA of the scene as `prepare` left it, frozen (module doc).
+
+        `record=False` traces it plainly: for a caller whose every render is a new configuration or
+        seed (training and bootstrap renders, material previews, the demo's photos), where a recording
+        would never replay and only costs its 10-19%.
+        """
+        if not record:
+            return np.array(self.mi.render(self.scene, spp=int(spp), seed=int(seed)), dtype=np.float32)
         state = (self.version, int(self._applied.get("sensor.film.size", 0)), int(spp), int(seed))
         return np.array(_frozen_render()(self.scene, state), dtype=np.float32)
 

@@ -35,6 +35,7 @@ class RendererProtocol(Protocol):
         background: Literal["white", "transparent"] = ...,
         floor: bool = ...,
         seed: int = ...,
+        record: bool = ...,
     ) -> BeautyResult: ...
 
     def part_ids(self, shape: Any, camera: Camera, size: int = ...) -> np.ndarray: ...

@@ -152,8 +152,13 @@ class Renderer:
         background: Literal["white", "transparent"] = "white",
         floor: bool = False,
         seed: int = 0,
+        record: bool = True,
     ) -> BeautyResult:
-        """Path-traced image under the envmap (constant white sky when `envmap` is None)."""
+        """Path-traced image under the envmap (constant white sky when `envmap` is None).
+
+        `record`: freeze the render for replays of this configuration (`BeautyPool.render`); False
+        for callers whose renders never repeat a configuration and seed.
+        """
         if background not in ("white", "transparent"):
             raise ValueError(f"background must be 'white' or 'transparent', got {background!r}")
         start = time.perf_counter()
@@ -168,7 +173,7 @@ class Renderer:
         )
         resolved = self.resolve_materials(shape, materials)
         with _RENDER_LOCK:
-            image = self._beauty_pool(shape, resolved, envmap, camera, options).render(spp, seed)
+            image = self._beauty_pool(shape, resolved, envmap, camera, options).render(spp, seed, record)
         premultiplied, alpha = image[..., :3], image[..., 3]
         hdr, srgb = composite(premultiplied, alpha, background)
         return BeautyResult(

@@ -132,6 +132,7 @@ def render_training_example(
         background="white",
         floor=False,
         seed=int(spec.seed % (2**31 - 1)),
+        record=False,  # every training render has its own scene and seed: a recording would never replay
     )
     part_ids = np.asarray(renderer.part_ids(shape_mesh, camera, size=size)).astype(np.uint16)
     material_ids, substance_ids = label_maps(part_ids, spec)
