@@ -163,3 +163,24 @@ def test_uv_sphere_faces_point_outwards() -> None:
     centroids = v[f].mean(axis=1)
     assert (np.einsum("ij,ij->i", normals, centroids) > 0).all()
     assert part.uv_density == pytest.approx(1.0 / np.pi, rel=0.05)  # UV area 1 over area pi
+
+
+def test_many_unwraps_in_a_row_never_hang() -> None:
+    """xatlas can hang in an atlas's destructor (a lost wake-up in its task scheduler); the unwrap
+    destroys atlases late so that it cannot. A degenerate part is the quickest atlas, where an
+    immediate destruction hung within 2,000-8,000 of them: 30,000 in a row must finish (a child
+    process, so that a hang fails the test instead of the suite)."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np\n"
+            "from photoshape_flow.geometry.preprocess import PreprocessOptions, _xatlas_unwrap\n"
+            "v, f, o = np.zeros((3, 3)), np.array([[0, 1, 2]]), PreprocessOptions()\n"
+            "for _ in range(30000):\n"
+            "    _xatlas_unwrap(v, f, o)\n"
+            "print('done')\n")
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    except subprocess.TimeoutExpired:
+        pytest.fail("30,000 xatlas unwraps did not finish in 60 s: an atlas's destructor hung")
+    assert out.stdout.strip() == "done"

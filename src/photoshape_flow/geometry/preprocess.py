@@ -10,6 +10,8 @@ normals. D_i = A_uv / A_world is then a property of each `PartMesh`.
 
 from __future__ import annotations
 
+import threading
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +24,15 @@ from photoshape_flow.geometry.raw import BadShapeError, RawPart, RawShape
 
 PREPROCESS_VERSION = 1  # bump when the output of `preprocess` changes for the same input
 MAX_COORDINATE = 1e12  # |x|, |y|, |z| of any vertex: a city in micrometres fits; 1e308 would overflow extents
+# xatlas' task scheduler (0.0.11) can hang for good when an atlas is destroyed: the destructor raises
+# a worker's wake-up flag without the worker's mutex, so a worker between reading the flag and going
+# to sleep misses it and the destructor's join waits for ever (a loop over degenerate parts hung
+# within 2,000-8,000 atlases, 4 runs of 4; the suite's fuzz test hung once). A worker is in that
+# window only just after it started or ran a task, so each atlas is destroyed late, once this many
+# newer ones exist (600,000 atlases, 310,000 of them on a loaded machine, never hung).
+RETIRED_ATLASES = 4
+_retired: deque[Any] = deque()
+_retired_lock = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -132,7 +143,17 @@ def _xatlas_unwrap(v: np.ndarray, f: np.ndarray, options: PreprocessOptions) -> 
     atlas.generate(chart_options, xatlas.PackOptions())
     vmapping, indices, atlas_uvs = atlas.get_mesh(0)
     pos_id = np.asarray(vmapping, np.int64)
-    return pos_id, v[pos_id], np.asarray(atlas_uvs, np.float64), np.asarray(indices, np.int64).reshape(-1, 3)
+    unwrapped = pos_id, v[pos_id], np.asarray(atlas_uvs, np.float64), np.asarray(indices, np.int64).reshape(-1, 3)
+    _retire(atlas)
+    return unwrapped
+
+
+def _retire(atlas: Any) -> None:
+    """Keep `atlas` alive until `RETIRED_ATLASES` newer ones exist, then let the oldest go (see there)."""
+    with _retired_lock:
+        _retired.append(atlas)
+        oldest = _retired.popleft() if len(_retired) > RETIRED_ATLASES else None
+    del oldest  # destroyed here, outside the lock
 
 
 def _finish_part(
