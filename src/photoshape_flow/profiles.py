@@ -118,10 +118,9 @@ class FitConfig:
 
     The cost weights and the scores' temperature are fitted per classifier on `calibration_cases`
     validation renders made to look like aligned product photos (`fitting.calibration`,
-    docs/decisions.md D34), never on exemplars or evaluation worlds; the blur is the one of
-    `calibration_blurs` with the lowest held-out log-loss on those renders. The five weights and `blur` are the
-    hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or no
-    validation render yields a usable case; they also light and expose the calibration's own cases.
+    docs/decisions.md D34), never on exemplars or evaluation worlds, at `blur` (D64). The five weights
+    are the hand-set fallback (D32), used (and reported as "hand-set") when `calibration_cases` is 0 or
+    no validation render yields a usable case; they also light and expose the calibration's own cases.
     """
 
     top_k: int = 5  # candidates from the current ranking, per part
@@ -152,7 +151,6 @@ class FitConfig:
     refine_spp: int = 4  # per gradient render (a new seed each step) and per UV-search render
     refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
     calibration_cases: int = 48  # validation renders the weights are fitted on (0: the hand-set weights)
-    calibration_blurs: tuple[float, ...] = (0.0, 1.0)  # compared on the same renders (empty: `blur` only)
     calibration_at_exemplar_size: bool = True  # degrade the calibration's photos at the median stored
     #                                           exemplar's side, not the render's (D45)
 
@@ -230,7 +228,7 @@ PROFILES: dict[str, Profile] = {
         inference=InferenceConfig(top_k=3),
         # a smoke profile: calibration and refinement run, briefly (they are over half of a tiny run's time)
         fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=3,
-                      refine_size=32, calibration_cases=3, calibration_blurs=(1.0,)),
+                      refine_size=32, calibration_cases=3),
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),
     ),
     "small": Profile(

@@ -18,11 +18,10 @@ under val envmaps, true material of every part known from its spec) becomes a ca
    `render_candidates`, `profiled_terms`) with the profile's hand-set weights, at the render's
    camera; each observed part whose true material is among its candidates is one `fit.calibrate.Case`.
 
-Each blur of `fit.calibration_blurs` measures the same renders (rendered once, `CachedFrame`); the
-blur and the model (every weight fitted, the hand-set weights with only their temperature fitted, or
-the hand-set weights as they are: `choices`) with the lowest cross-validated log-loss are kept and
-refitted on all that blur's cases (`fit.calibrate.fit`, centred on the hand-set weights, or
-`fit.calibrate.fit_temperature`) and stored in the classifier's calibrations
+The cases are measured at `fit.blur` (a blur chosen here decided nothing: D64); the model (every
+weight fitted, the hand-set weights with only their temperature fitted, or the hand-set weights as
+they are: `choices`) with the lowest cross-validated log-loss is kept and refitted on all the cases
+(`fit.calibrate.fit`, centred on the hand-set weights, or `fit.calibrate.fit_temperature`) and stored
 (`networks.calibrations.Calibration.fit`) with a key of everything they depend on (code, fit config,
 checkpoint, the sampled renders, enabled materials, training envmaps, exemplar size, seed), like the D24
 calibrations; `run_fit` computes them when the key changed and the stage then ranks with them. Two
@@ -37,7 +36,6 @@ priors and the colour likelihood's sigma.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import logging
 import time
@@ -51,7 +49,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.devices import set_torch_threads
 from photoshape_flow.fit import calibrate as cal
-from photoshape_flow.fit.scene import FitScene, FrameRenderer, exposure_grid, profiled_terms, render_candidates
+from photoshape_flow.fit.scene import FitScene, exposure_grid, profiled_terms, render_candidates
 from photoshape_flow.fitting.context import PairData
 from photoshape_flow.fitting.steps import candidates_of, lighting_estimate
 from photoshape_flow.hashing import item_seed, stable_hash
@@ -65,39 +63,11 @@ from photoshape_flow.synth.spec import RenderSpec
 
 log = logging.getLogger(__name__)
 
-CODE_VERSION = "fit-calibration-3"  # 2: photos degraded at the exemplars' size (D45); 3: model chosen (D48)
+CODE_VERSION = "fit-calibration-4"  # 2: photos degraded at the exemplars' size (D45); 3: model chosen (D48);
+#                                     4: one blur, `fit.blur` (D64)
 # what a calibration may keep (`choices`): every weight and the temperature fitted, the hand-set weights
 # with their temperature fitted, or the hand-set weights as they are (temperature 1)
 MODELS = ("fitted", "hand_set_temperature", "hand_set")
-
-
-class CachedFrame(FrameRenderer):
-    """A `FrameRenderer` that renders each (mesh, materials, camera, envmap) once per render case.
-
-    Comparing blurs re-runs a case's lighting and candidate loops on the same renders (the blur only
-    post-processes them, `FitScene.render`), so the second blur costs statistics, not renders.
-    """
-
-    def __init__(self, frame: FrameRenderer):
-        super().__init__(frame.renderer, frame.size, frame.spp)
-        self._cache: dict[str, np.ndarray] = {}
-
-    def clear(self) -> None:
-        self._cache = {}
-
-    def render_rgba(self, mesh: Any, materials: Sequence[Any], camera: Any, envmap: Any,
-                    uv_transforms: Sequence[Any] | None = None) -> np.ndarray:
-        key = repr((id(mesh), list(materials), camera, envmap, uv_transforms))
-        if key not in self._cache:
-            self._cache[key] = super().render_rgba(mesh, materials, camera, envmap, uv_transforms)
-        return self._cache[key]
-
-
-def with_blur(ctx: Any, blur: float) -> Any:
-    """A shallow copy of a fit context whose config has `blur` (the frame, meshes and specs shared)."""
-    other = copy.copy(ctx)
-    other.cfg = dataclasses.replace(ctx.cfg, blur=float(blur))
-    return other
 
 
 class RenderRanker:
@@ -219,72 +189,42 @@ def fit_calibration(ctx: Any, settings: Settings, renders: Sequence[m.Rendering]
                     progress: Progress | None = None, photo_size: int | None = None) -> dict[str, Any] | None:
     """The calibration record of `renders` (see the module docstring); None when no usable case came out.
 
-    Every blur of `fit.calibration_blurs` (or `fit.blur` alone) builds its cases from the same
-    renders; the blur whose fitted cost has the lowest cross-validated log-loss is kept (in-sample
-    log-loss when a fold is empty), and the weights and temperature are refitted on all its cases.
-    `photo_size`: the side the photos are degraded at (None: each render's own).
+    The model with the lowest cross-validated log-loss (in-sample when a fold is empty) is kept and its
+    weights and temperature refitted on all the cases. `photo_size`: the side the photos are degraded
+    at (None: each render's own).
     """
     started = time.perf_counter()
     ranker = RenderRanker(ctx, settings)
-    plain = ctx.frame
-    frame = CachedFrame(plain)
-    ctx._frame = frame  # the blur contexts below share it; the stage gets the plain one back
-    try:
-        return _fit_cases(ctx, settings, renders, ranker, frame, started, progress, photo_size)
-    finally:
-        ctx._frame = plain
-
-
-def _fit_cases(ctx: Any, settings: Settings, renders: Sequence[m.Rendering], ranker: RenderRanker,
-               frame: CachedFrame, started: float, progress: Progress | None = None,
-               photo_size: int | None = None) -> dict[str, Any] | None:
-    """`fit_calibration`'s loop over renders and blurs, then the fit of the best blur."""
-    blurs = tuple(dict.fromkeys(float(b) for b in (ctx.cfg.calibration_blurs or (ctx.cfg.blur,))))
-    contexts = {b: with_blur(ctx, b) for b in blurs}
-    cases: dict[float, list[cal.Case]] = {b: [] for b in blurs}
+    cases: list[cal.Case] = []
     counts = {"renders": 0, "parts": 0, "true_in_candidates": 0, "failed": 0}
     for row in counted(progress, "fit calibration renders", renders):
-        frame.clear()
         try:
-            found = {b: render_cases(contexts[b], ranker, row, settings, photo_size) for b in blurs}
+            found, n = render_cases(ctx, ranker, row, settings, photo_size)
         except (ValueError, OSError) as exc:  # one unreadable or invisible render never stops the fit
             log.warning("fit calibration: %s/%s skipped: %s", row.kind, row.key, exc)
             counts["failed"] += 1
             continue
-        for b, (got, _) in found.items():
-            cases[b] += got
-        n = found[blurs[0]][1]
+        cases += found
         counts["renders"] += 1
         counts["parts"] += n["parts"]
         counts["true_in_candidates"] += n["true_in_candidates"]
-    frame.clear()
-    base = hand_set(ctx.cfg)
-    by_blur: dict[str, Any] = {}
-    best: tuple[float, float, str] | None = None  # (log-loss, blur, model)
-    for b in blurs:
-        usable = cal.usable(cases[b])
-        if not usable:
-            continue
-        checked = held_out(usable, ctx.cfg)
-        by_blur[str(b)] = {"cases": len(usable), "held_out": checked}
-        for loss, model in choices(checked, usable, base):
-            if best is None or loss < best[0]:
-                best = (loss, b, model)
-    if best is None:
+    usable = cal.usable(cases)
+    if not usable:
         log.warning("fit calibration: no usable case in %d validation renders; hand-set weights", len(renders))
         return None
-    _, blur, model = best
-    chosen = cal.usable(cases[blur])
-    fitted = refit(model, chosen, base)
+    base = hand_set(ctx.cfg)
+    checked = held_out(usable, ctx.cfg)
+    _, model = min(choices(checked, usable, base), key=lambda item: item[0])  # ties: the first of `MODELS`
+    fitted = refit(model, usable, base)
     if not np.isfinite(fitted.temperature):
         log.warning("fit calibration: no term carries information on these cases; hand-set weights")
         return None
     record = {"weights": dict(zip(cal.TERMS, (round(w, 6) for w in fitted.weights), strict=True)),
-              "temperature": round(fitted.temperature, 6), "blur": blur, "model": model, "photo_size": photo_size,
-              **by_blur[str(blur)], **counts,
-              "by_blur": by_blur, "seconds": round(time.perf_counter() - started, 2)}
+              "temperature": round(fitted.temperature, 6), "blur": float(ctx.cfg.blur), "model": model,
+              "photo_size": photo_size, "cases": len(usable), "held_out": checked, **counts,
+              "seconds": round(time.perf_counter() - started, 2)}
     log.info("fit calibration (classifier %s): blur %s, %s weights %s, temperature %.3f on %d cases from %d renders "
-             "(%.1f s); held out: %s", ctx.classifier.id, blur, model, record["weights"], fitted.temperature,
+             "(%.1f s); held out: %s", ctx.classifier.id, record["blur"], model, record["weights"], fitted.temperature,
              record["cases"], counts["renders"], record["seconds"], record["held_out"])
     return record
 

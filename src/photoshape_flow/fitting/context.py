@@ -151,11 +151,6 @@ class FitContext:
         return self.cfg.prior_weight if self.calibration is None else float(self.calibration["weights"]["prior"])
 
     @property
-    def blur(self) -> float:
-        """The blur in use: the one the calibration chose among `fit.calibration_blurs`, else `fit.blur`."""
-        return self.cfg.blur if self.calibration is None else float(self.calibration.get("blur", self.cfg.blur))
-
-    @property
     def temperature(self) -> float:
         """The softmax temperature of the rows' scores (1 with the hand-set weights: uncalibrated)."""
         return 1.0 if self.calibration is None else float(self.calibration["temperature"])
@@ -181,7 +176,7 @@ def weights_report(ctx: FitContext) -> dict[str, Any]:
                            "gradient": round(w.gradient, 4), "highlight": round(w.highlight, 4),
                            "deep": round(w.deep, 4),
                            "prior": round(ctx.prior_weight, 4),
-                           "temperature": round(ctx.temperature, 4), "blur": ctx.blur}
+                           "temperature": round(ctx.temperature, 4), "blur": ctx.cfg.blur}
     if ctx.calibration is not None:
         out["model"] = ctx.calibration.get("model", "fitted")
         out["cases"] = ctx.calibration.get("cases")
@@ -218,7 +213,7 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
         source_hash = row.params_hash
     observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.blur,
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
                                 foreground=foreground, features=ctx.features)
     return PairData(pair, scene, rows, source_hash)
 
