@@ -80,13 +80,19 @@ def test_training_round_pools_use_part_substances(db_url: str, store) -> None:  
         col = seed_collection(session, store)
         pair_id, shape_id = next(iter(col.pairs.items()))
         seat, back, legs = col.parts[shape_id]
-        for part_id, substance in ((seat, "leather"), (back, "fabric"), (legs, None)):
+        # the seat as the substance stage stores it (probabilities beside background and the map's blob),
+        # the back with its label alone
+        seat_probs = {"leather": 0.6, "wood": 0.3, "fabric": 0.0, "background": 0.1, "map_blob": "ab.npy"}
+        for part_id, substance, probs in ((seat, "leather", seat_probs), (back, "fabric", {}), (legs, None, {})):
             session.add(m.PartSubstance(pair_id=pair_id, part_id=part_id, observed=substance is not None,
-                                        substance=substance, pixel_count=10 if substance else 0))
+                                        substance=substance, pixel_count=10 if substance else 0, probs=probs))
     with session_scope(db_url) as session:
         pools = load_pools(session, "training")
         bootstrap = load_pools(session, "bootstrap")
-    assert pools.part_substances == {pair_id: {seat: "leather", back: "fabric", legs: None}}
+    # what the renders draw from: the network's probabilities over substances (a label alone is certain)
+    assert pools.part_substances == {pair_id: {seat: {"leather": 0.6, "wood": 0.3}, back: {"fabric": 1.0},
+                                               legs: None}}
+    assert pools.shape_substances == {shape_id: {seat: ["leather"], back: ["fabric"]}}
     # only pairs with substances are drawn in the training round
     candidates = [c for split in ("train", "val") for c in pools.priors[split].candidates]
     assert [c.pair_id for c in candidates] == [pair_id]

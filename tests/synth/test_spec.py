@@ -87,6 +87,24 @@ def test_observed_substances_condition_materials_and_unobserved_use_the_prior() 
         assert by_part[73].substance_source == "prior" and by_part[73].material_id == 6
 
 
+def test_observed_parts_draw_from_the_networks_probabilities_not_its_most_likely_label() -> None:
+    observed = {70: {71: {"leather": 0.25, "wood": 0.75}, 72: {"fabric": 0.5, "plastic": 0.5}, 73: None}}
+    counts: dict[int, Counter[str]] = {71: Counter(), 72: Counter()}
+    for i in range(400):
+        spec = sample_render_spec(np.random.default_rng(i), PRIOR, PARTS, MATERIALS, [11], observed)
+        for p in spec.parts:
+            if p.part_id in counts:
+                assert p.substance_source == "observed" and p.material_id in MATERIALS[p.substance]
+                counts[p.part_id][p.substance] += 1
+    assert set(counts[71]) == {"leather", "wood"} and 0.17 < counts[71]["leather"] / 400 < 0.33
+    assert set(counts[72]) == {"fabric", "plastic"} and 0.4 < counts[72]["fabric"] / 400 < 0.6
+    # a substance without an enabled material: its mass goes to what can be drawn
+    no_plastic = {**MATERIALS, "plastic": []}
+    drawn = {p.substance for i in range(50) for p in sample_render_spec(
+        np.random.default_rng(i), PRIOR, PARTS, no_plastic, [11], observed).parts if p.part_id == 72}
+    assert drawn == {"fabric"}
+
+
 def test_bootstrap_draws_from_the_name_prior_and_only_available_substances() -> None:
     materials = {"leather": [1], "fabric": [3], "wood": [4], "metal": [6], "plastic": []}
     counts: Counter[str] = Counter()

@@ -18,6 +18,7 @@ import sqlalchemy as sa
 
 from photoshape_flow.db import models as m
 from photoshape_flow.hashing import item_seed
+from photoshape_flow.synth.priors import observed_prior
 from photoshape_flow.synth.spec import PairCandidate, PairPosePrior, PartInfo
 from photoshape_flow.vocab import STATUS_OK, SUBSTANCES
 
@@ -52,7 +53,8 @@ class RenderPools:
     envmaps: dict[str, list[int]]
     parts: dict[int, list[PartInfo]]
     materials_by_substance: dict[str, list[int]]
-    part_substances: dict[int, dict[int, str | None]] | None
+    # pair -> part -> the substance network's probabilities over the part (None: unobserved)
+    part_substances: dict[int, dict[int, dict[str, float] | None]] | None
     shape_substances: dict[int, dict[int, list[str]]]
     shape_split: dict[int, str]
     split_source: str
@@ -116,21 +118,22 @@ def load_pools(session: sa.orm.Session, round: Round, val_fraction: float = VAL_
         .order_by(m.Pair.id)
     ).all()
 
-    part_substances: dict[int, dict[int, str | None]] | None = None
+    part_substances: dict[int, dict[int, dict[str, float] | None]] | None = None
     shape_substances: dict[int, dict[int, list[str]]] = defaultdict(lambda: defaultdict(list))
     if round == "training":
         part_substances = defaultdict(dict)
         rows = session.execute(
             sa.select(m.PartSubstance.pair_id, m.PartSubstance.part_id, m.PartSubstance.observed,
-                      m.PartSubstance.substance, m.Pair.shape_id)
+                      m.PartSubstance.substance, m.PartSubstance.probs, m.Pair.shape_id)
             .join(m.Pair, m.Pair.id == m.PartSubstance.pair_id)
             .order_by(m.PartSubstance.pair_id, m.PartSubstance.part_id)
         ).all()
-        for pair_id, part_id, observed, substance, shape_id in rows:
-            value = substance if observed else None
-            part_substances[pair_id][part_id] = value
-            if value:
-                shape_substances[shape_id][part_id].append(value)
+        for pair_id, part_id, observed, substance, probs, shape_id in rows:
+            belief = (observed_prior({s: float((probs or {}).get(s, 0.0)) for s in SUBSTANCES})
+                      or observed_prior(substance)) if observed else {}
+            part_substances[pair_id][part_id] = belief or None
+            if belief and substance:
+                shape_substances[shape_id][part_id].append(substance)
         with_substances = [p for p in pair_rows if p.id in part_substances]
         if with_substances:
             candidates_rows = with_substances

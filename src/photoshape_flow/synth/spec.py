@@ -15,8 +15,9 @@ a constant):
 2. a camera pose uniformly from the pose prior (the azimuth/elevation of every coarse-alignment pair),
    jittered by U(-pi/12, pi/12) in azimuth and U(-pi/24, pi/24) in elevation, fov ~ U(50, 60) degrees,
    distance ~ U(1.3, 1.75);
-3. per part a substance (the pair's PartSubstance when observed, else a prior, see `priors`), then a
-   material uniformly among the enabled materials of that substance;
+3. per part a substance, drawn from the pair's PartSubstance probabilities when observed (not their
+   most likely label: `priors.observed_prior`), else from a prior (see `priors`), then a material
+   uniformly among the enabled materials of that substance;
 4. an envmap uniformly among the split's envmaps, radiance scale ~ U(0.9, 1.2), rotation ~ U(0, 2 pi);
 5. per part a UV transform: scale 2^U(-1, 0.5), rotation U(0, 2 pi), offset U(0, 1)^2, applied on top
    of the renderer's texture-scale formula (UVs / sqrt(D_i) / material scale).
@@ -263,7 +264,7 @@ def sample_render_spec(
     parts: Mapping[int, Sequence[PartInfo]],
     materials_by_substance: Mapping[str, Sequence[int]],
     envmaps: Sequence[int],
-    part_substances: Mapping[int, Mapping[int, str | None]] | None = None,
+    part_substances: Mapping[int, Mapping[int, str | Mapping[str, float] | None]] | None = None,
     *,
     key: str = "",
     seed: int = 0,
@@ -277,8 +278,9 @@ def sample_render_spec(
 
     - `parts`: shape_id -> its parts; `materials_by_substance`: substance -> enabled material ids;
       `envmaps`: envmap ids of the item's split.
-    - `part_substances`: pair_id -> {part_id: substance or None (unobserved)}; None means the bootstrap
-      round (no observations: name prior, or uniform with `name_prior=False`).
+    - `part_substances`: pair_id -> {part_id: the substance network's probabilities over the part (or
+      a substance, taken as certain), None when unobserved}; None means the bootstrap round (no
+      observations: name prior, or uniform with `name_prior=False`).
     - `shape_substances`: shape_id -> {part_id: substances observed in any pair}, the prior for parts
       the drawn pair does not observe (falls back to the name prior).
     - `env_scale_range`: the envmap's radiance scale is drawn uniformly from it (the exposure a photo
@@ -341,8 +343,9 @@ def sample_render_spec(
             rotation=float(part_rng.uniform(0.0, 2 * math.pi)),
             offset=(float(part_rng.uniform(0.0, 1.0)), float(part_rng.uniform(0.0, 1.0))),
         )
-        substance = observed.get(part.part_id)
-        if part_substances is not None and substance in available:
+        belief = priors.observed_prior(observed.get(part.part_id))
+        if part_substances is not None and any(belief.get(s, 0.0) > 0.0 for s in available):
+            substance = _draw_substance(u_substance, priors.restrict(belief, available))
             source = "observed"
         else:
             if part_substances is None:
