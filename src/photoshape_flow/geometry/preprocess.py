@@ -11,6 +11,7 @@ normals. D_i = A_uv / A_world is then a property of each `PartMesh`.
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -28,10 +29,16 @@ MAX_COORDINATE = 1e12  # |x|, |y|, |z| of any vertex: a city in micrometres fits
 # a worker's wake-up flag without the worker's mutex, so a worker between reading the flag and going
 # to sleep misses it and the destructor's join waits for ever (a loop over degenerate parts hung
 # within 2,000-8,000 atlases, 4 runs of 4; the suite's fuzz test hung once). A worker is in that
-# window only just after it started or ran a task, so each atlas is destroyed late, once this many
-# newer ones exist (600,000 atlases, 310,000 of them on a loaded machine, never hung).
+# window only just after it started or ran a task, so each atlas is destroyed late: once this many
+# newer ones exist *and* it has been retired this long. The count alone (4) ran 600,000 atlases
+# without a hang, yet hung once in the suite on a loaded 2-core machine, where a starved worker can
+# wait longer than 4 quick atlases take; a time slice on a busy Linux scheduler is a few ms to 24 ms.
 RETIRED_ATLASES = 4
-_retired: deque[Any] = deque()
+RETIRED_SECONDS = 0.05
+# each atlas holds its own worker threads (cores - 1): beyond this many retired the unwrap waits for
+# the oldest's time instead of holding more threads (only a loop of near-empty parts gets here)
+RETIRED_CAP = 256
+_retired: deque[tuple[float, Any]] = deque()
 _retired_lock = threading.Lock()
 
 
@@ -149,10 +156,19 @@ def _xatlas_unwrap(v: np.ndarray, f: np.ndarray, options: PreprocessOptions) -> 
 
 
 def _retire(atlas: Any) -> None:
-    """Keep `atlas` alive until `RETIRED_ATLASES` newer ones exist, then let the oldest go (see there)."""
+    """Keep `atlas` alive until `RETIRED_ATLASES` newer ones exist and `RETIRED_SECONDS` have passed, then
+    let the oldest go (see there); past `RETIRED_CAP` retired atlases, wait for the oldest's time."""
     with _retired_lock:
-        _retired.append(atlas)
-        oldest = _retired.popleft() if len(_retired) > RETIRED_ATLASES else None
+        _retired.append((time.monotonic(), atlas))
+        if len(_retired) <= RETIRED_ATLASES:
+            return
+        retired_at, _ = _retired[0]
+        wait = retired_at + RETIRED_SECONDS - time.monotonic()
+        if wait > 0 and len(_retired) <= RETIRED_CAP:
+            return
+        _, oldest = _retired.popleft()
+    if wait > 0:
+        time.sleep(wait)
     del oldest  # destroyed here, outside the lock
 
 
