@@ -28,19 +28,11 @@ from photoshape_flow.recognition.bn_prior import photo_cases
 from photoshape_flow.recognition.material_sets import material_set
 from photoshape_flow.store import BlobStore
 
-from ..common import region_hits, results_dir
+from ..common import HIT_COLUMNS, interval, region_hits, results_dir
 
-COLUMNS = {"top1": 2, "top5": 3, "substance": 4}  # of `region_hits`' rows
-
-
-def paired_interval(a: np.ndarray, b: np.ndarray, column: int, draws: int = 2000) -> tuple[float, float, float]:
-    """Mean of b - a over regions, and its 95% interval resampling renders (the rows' case column)."""
-    diff = b[:, column] - a[:, column]
-    cases = np.unique(a[:, 0]).astype(int)
-    per_case = {c: diff[a[:, 0] == c] for c in cases}
-    rng = np.random.default_rng(0)
-    means = [np.concatenate([per_case[c] for c in rng.choice(cases, len(cases))]).mean() for _ in range(draws)]
-    return float(diff.mean()), float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+# what is reported -> the column of `region_hits`' rows
+COLUMNS = {"top1": HIT_COLUMNS.index("top1"), "top5": HIT_COLUMNS.index("top5"),
+           "substance": HIT_COLUMNS.index("substance_top")}
 
 
 def main() -> None:
@@ -72,10 +64,11 @@ def main() -> None:
         print(classifier_id, {k: v for k, v in out[str(classifier_id)].items() if k != "hits"}, flush=True)
     first, last = args.classifier[0], args.classifier[-1]
     if first != last:
+        a, b = hits[first], hits[last]  # the same regions in the same order: paired by row
         for name, column in COLUMNS.items():
-            d, low, high = paired_interval(hits[first], hits[last], column)
-            out[f"{last}-{first}.{name}"] = [round(d, 4), round(low, 4), round(high, 4)]
-            print(f"{name}: {last} minus {first} {d:+.3f} ({low:+.3f}, {high:+.3f}) over {len(hits[first])} regions, "
+            d, low, high = interval(b[:, column] - a[:, column], a[:, 0], np.random.default_rng(0), draws=2000)
+            out[f"{last}-{first}.{name}"] = [d, low, high]
+            print(f"{name}: {last} minus {first} {d:+.3f} ({low:+.3f}, {high:+.3f}) over {len(a)} regions, "
                   f"{len(cases)} renders")
     target = results_dir(settings, "substance_draw") / "validation.json"
     target.parent.mkdir(parents=True, exist_ok=True)

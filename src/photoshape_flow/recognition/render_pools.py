@@ -129,10 +129,10 @@ def load_pools(session: sa.orm.Session, round: Round, val_fraction: float = VAL_
             .order_by(m.PartSubstance.pair_id, m.PartSubstance.part_id)
         ).all()
         for pair_id, part_id, observed, substance, probs, shape_id in rows:
-            belief = (observed_prior({s: float((probs or {}).get(s, 0.0)) for s in SUBSTANCES})
-                      or observed_prior(substance)) if observed else {}
+            # the stored probabilities (beside `background` and the map's blob name), else the label alone
+            belief = (observed_prior(probs) or observed_prior(substance)) if observed else {}
             part_substances[pair_id][part_id] = belief or None
-            if belief and substance:
+            if observed and substance:
                 shape_substances[shape_id][part_id].append(substance)
         with_substances = [p for p in pair_rows if p.id in part_substances]
         if with_substances:
