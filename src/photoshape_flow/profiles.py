@@ -143,8 +143,9 @@ class FitConfig:
     #                                 "none": no term, no read (measured level on both worlds: D54)
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
-    # refinement of the winners (`fit.refine`, docs/decisions.md D35): only for the pairs publish uses
-    refine: bool = True
+    # refinement of the winners (`fit.refine`, D35): only for the pairs publish uses. Off: under the
+    # estimated lighting it moved the winners away from the truth (validation renders relit worse, D66)
+    refine: bool = False
     refine_max_rank: int = 12  # pairs up to this rank per shape (keep equal to publish.max_rank) and each
     #                            exemplar's best pair are refined; the others keep the selection
     refine_iterations: int = 8  # Adam steps (after a closed-form warm start) on the tint and roughness scale
@@ -226,7 +227,7 @@ PROFILES: dict[str, Profile] = {
         training_renders=TrainingRendersConfig(count=32, size=48, spp=4),
         training=CLASSIFIER_PRESETS["tiny"],
         inference=InferenceConfig(top_k=3),
-        # a smoke profile: calibration and refinement run, briefly (they are over half of a tiny run's time)
+        # a smoke profile: the calibration runs, briefly (with `fit.refine=true` the refinement too)
         fit=FitConfig(top_k=3, size=48, spp=4, rotations=2, refine_max_rank=1, refine_iterations=3,
                       refine_size=32, calibration_cases=3),
         publish=PublishConfig(max_rank=1, views=2, size=48, spp=4),

@@ -98,7 +98,8 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
     assert len(pairs) >= 2
     calls: list[tuple[str, int, int]] = []
     ctx = StageContext.create(progress=lambda task, done, total: calls.append((task, done, total)))
-    first = run_stage("fit", "tiny", ctx)
+    refining = resolve_profile("tiny", ["fit.refine=true"])  # off by default (D66); its path is tested here
+    first = run_stage("fit", refining, ctx)
     assert (first.done, first.skipped, first.failed) == (len(pairs) + 1, 0, 0)
     fit_calls = [c for c in calls if c[0] == "fit pairs"]  # the CLI's bar and the flows' artifact
     assert fit_calls[0] == ("fit pairs", 0, len(pairs) + 1) and fit_calls[-1][1] == len(pairs) + 1
@@ -154,12 +155,12 @@ def test_fit_stage_moves_true_materials_up_stores_lighting_and_resumes(tiny_demo
         assert {p for p, _ in candidate_method_keys(session, "fit")} == pairs | {blind.id}  # exports, gallery
 
     before = _fit_rows(db_url)
-    again = run_stage("fit", "tiny", ctx)
+    again = run_stage("fit", refining, ctx)
     assert (again.done, again.skipped, again.failed) == (0, len(pairs) + 1, 0) and _fit_rows(db_url) == before
     held = min(pairs)
     helper = hold_in_helper(db_url, f"fit:{rows[0].method_key}", [str(held)], seconds=120)
     try:
-        relit = run_stage("fit", resolve_profile("tiny", ["fit.lighting_rounds=2"]), ctx)
+        relit = run_stage("fit", resolve_profile("tiny", ["fit.refine=true", "fit.lighting_rounds=2"]), ctx)
     finally:
         helper.kill()
         helper.wait()

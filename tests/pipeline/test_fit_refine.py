@@ -34,10 +34,12 @@ def test_only_used_pairs_are_refined(db_url: str, store: BlobStore) -> None:
                                rank=1, material_id=ids["red_leather"]))
         s.flush()
         assert {a.status for a in s.execute(sa.select(m.Alignment)).scalars()} == {"ok"}
-        ctx = SimpleNamespace(cfg=FitConfig(refine_max_rank=1), source_key="classifier:1")
+        ctx = SimpleNamespace(cfg=FitConfig(refine=True, refine_max_rank=1), source_key="classifier:1")
         # the second pair is past publish's rank but its exemplar's best; the third is neither
         assert [is_refined(s, ctx, p) for p in (first, second, third)] == [True, True, False]
         ctx.cfg = replace(ctx.cfg, refine_max_rank=3)
         assert is_refined(s, ctx, third)
         ctx.cfg = replace(ctx.cfg, refine=False)
+        assert not any(is_refined(s, ctx, p) for p in (first, second, third))
+        ctx.cfg = FitConfig(refine_max_rank=1)  # the default refines nothing: it relit worse (D66)
         assert not any(is_refined(s, ctx, p) for p in (first, second, third))
