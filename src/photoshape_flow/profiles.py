@@ -143,8 +143,8 @@ class FitConfig:
     #                                 "none": no term, no read (measured level on both worlds: D54)
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
-    # refinement of the winners (`fit.refine`, D35): only for the pairs publish uses. Off: under the
-    # estimated lighting it moved the winners away from the truth (validation renders relit worse, D66)
+    # refinement of the winners (`fit.refine`, D35): only for the pairs publish uses. Off: its loss
+    # ignores the selection's silhouette blending (D41), and validation renders relit worse (D66)
     refine: bool = False
     refine_max_rank: int = 12  # pairs up to this rank per shape (keep equal to publish.max_rank) and each
     #                            exemplar's best pair are refined; the others keep the selection
