@@ -1,6 +1,7 @@
 """Does fit's refinement (D35) make a PhotoShape relight closer to the truth, on validation renders?
 
     python -m experiments.refine_relight.run --profile small [--cases 48] [--winners fit,truth]
+    python -m experiments.refine_relight.run --gaps --cases 6     # why: the true materials' photo/render gap
 
 Each of the fit calibration's validation renders (`fitting.calibration.validation_renders`: val
 shapes under val envmaps, the library's materials, each part's truth known) becomes a photo as the
@@ -50,7 +51,7 @@ from photoshape_flow.hashing import item_seed
 from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.networks.validation_photos import as_photo
 from photoshape_flow.profiles import resolve_profile
-from photoshape_flow.render import Camera
+from photoshape_flow.render import Camera, EnvmapSpec
 from photoshape_flow.scoring.relighting_eval import Relighter, silhouette_rmse
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
@@ -162,6 +163,41 @@ class Experiment:
         return out
 
 
+def gaps(experiment: Experiment, renders: list[m.Rendering]) -> dict[str, list[float]]:
+    """Mean log2 of photo / render per channel over the observed parts, true materials, four ways.
+
+    Lighting `true` (the render's own envmap, the exposure that fits the true materials) or `est`
+    (the stage's estimate and its winners' exposure); the render `raw` (unblended, what the
+    refinement's loss reads) or `blended` (over the photo's background at the silhouette and
+    softened like the photo, what the selection compares: `FitScene.exposed_linear`).
+    """
+    ctx = experiment.ctx
+    with session_scope(experiment.settings.resolved_database_url) as session:
+        envmaps = {e.id: e.blob for e in session.query(m.Envmap).all()}
+    ratios: dict[str, list[np.ndarray]] = {}
+    for row in renders:
+        case = experiment.photo_case(row)
+        if case is None:
+            continue
+        spec, truth, data = case
+        _, light, exposure = experiment.winners(data, truth)
+        materials = [ctx.spec(truth.get(p.index)) for p in data.scene.mesh.parts]
+        true_env = EnvmapSpec(experiment.store.resolve(envmaps[spec.envmap.envmap_id]), scale=spec.envmap.scale,
+                              rotation=spec.envmap.rotation)
+        ((_, true_exposure, _),) = sc.score_lighting(ctx.frame, data.scene, materials, [(None, true_env)],
+                                                     ctx.weights, experiment.cfg.erode)
+        for light_name, envmap, gain in (("true", true_env, true_exposure),
+                                         ("est", ctx.light_envmap(light), exposure)):
+            rgba = data.scene.render(ctx.frame, materials, envmap)
+            shown = {"raw": rgba[..., :3] * gain, "blended": data.scene.exposed_linear(rgba, gain)}
+            for kind, image in shown.items():
+                for mask in data.scene.masks.values():
+                    photo, render = data.scene.photo_linear[mask].mean(0), image[mask].mean(0)
+                    ratios.setdefault(f"{light_name}:{kind}", []).append(
+                        np.log2(np.maximum(photo, 1e-4) / np.maximum(render, 1e-4)))
+    return {k: [round(float(x), 3) for x in np.mean(v, axis=0)] for k, v in ratios.items()}
+
+
 def summarise(records: list[dict[str, Any]], winner_sets: list[str], seed: int = 0) -> dict[str, Any]:
     """Mean relit RMSE per arm and its paired difference from `unrefined` (95% interval over renders)."""
     rng = np.random.default_rng(seed)
@@ -186,6 +222,8 @@ def main() -> None:
     parser.add_argument("--winners", default="fit,truth")
     parser.add_argument("--size", type=int, default=128, help="relit render size (the evaluation's)")
     parser.add_argument("--spp", type=int, default=32)
+    parser.add_argument("--gaps", action="store_true",
+                        help="only the true materials' photo/render gap per channel (`gaps`), then exit")
     args = parser.parse_args()
     experiment = Experiment(args.profile, args.set, args.size, args.spp)
     winner_sets = args.winners.split(",")
@@ -194,6 +232,9 @@ def main() -> None:
     with session_scope(settings.resolved_database_url) as session:
         renders = fc.validation_renders(session, count, settings.seed)
         session.expunge_all()
+    if args.gaps:
+        print(json.dumps(gaps(experiment, renders)))
+        return
     records = []
     for row in renders:
         try:
