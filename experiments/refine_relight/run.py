@@ -5,7 +5,8 @@
 
 Each of the fit calibration's validation renders (`fitting.calibration.validation_renders`: val
 shapes under val envmaps, the library's materials, each part's truth known) becomes a photo as the
-calibration makes it: degraded like an exemplar, part map misaligned as fine alignment errs. The
+calibration makes it (`fitting.calibration.render_photo_case` at the render's own size): degraded
+like an exemplar, part map misaligned as fine alignment errs. The
 stage's own steps then run on it: candidates, the lighting estimate over the training envmaps, the
 selection (the profile's calibrated weights) and the refinement of the winners under that lighting
 (`fit.refine.refine_parts`, the stage's settings). Winner sets (`--winners`):
@@ -42,16 +43,13 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.fit import scene as sc
 from photoshape_flow.fit.refine import refine_parts
 from photoshape_flow.fit.select import rank_candidates
-from photoshape_flow.fit.validation import frame, misalign, sample_misalignment
 from photoshape_flow.fitting import calibration as fc
 from photoshape_flow.fitting.context import FitContext, PairData
 from photoshape_flow.fitting.refine import refine_settings
 from photoshape_flow.fitting.steps import candidates_of, lighting_estimate, select_materials
-from photoshape_flow.hashing import item_seed
 from photoshape_flow.networks.classifier_rows import resolve_classifier
-from photoshape_flow.networks.validation_photos import as_photo
 from photoshape_flow.profiles import resolve_profile
-from photoshape_flow.render import Camera, EnvmapSpec
+from photoshape_flow.render import EnvmapSpec
 from photoshape_flow.scoring.relighting_eval import Relighter, silhouette_rmse
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
@@ -96,25 +94,9 @@ class Experiment:
         self.ranker = fc.RenderRanker(self.ctx, self.settings)
 
     def photo_case(self, row: m.Rendering) -> tuple[RenderSpec, dict[int, int], PairData] | None:
-        """The render as the calibration's photo: degraded, framed, its part map misaligned; ranked."""
-        spec = RenderSpec.from_dict(row.params)
-        truth = spec.material_by_index()
-        hdr, ids = self.store.load_image(row.blobs["hdr"]), self.store.load_image(row.blobs["part_ids"])
-        ids = ids[..., 0] if ids.ndim == 3 else ids
-        rng = np.random.default_rng(item_seed(self.settings.seed, "fit-calibration", row.kind, row.key))
-        photo = as_photo(hdr, ids, int(rng.integers(2**31 - 1)))
-        rgb, labels, foreground = frame(photo, ids, self.cfg.size)
-        labels = misalign(labels, sample_misalignment(rng, self.cfg.size))
-        with session_scope(self.settings.resolved_database_url) as session:
-            mesh = self.ctx.mesh(session.get(m.Shape, row.shape_id))
-        camera = Camera(spec.camera.azimuth, spec.camera.elevation, spec.camera.distance, spec.camera.fov)
-        present = sorted(int(i) for i in np.unique(labels) if i > 0 and int(i) in truth)
-        scene = sc.FitScene.from_photo(mesh, camera, rgb, labels, present, self.cfg.erode, blur=self.cfg.blur,
-                                       foreground=foreground, features=self.ctx.features)
-        rows = self.ranker.rank(rgb, {i: (labels == i) & foreground for i in scene.masks})
-        if not rows:
-            return None
-        return spec, truth, PairData(m.Pair(shape_id=row.shape_id), scene, rows, None)
+        """The render as the calibration's photo (degraded at the render's own size), ranked."""
+        spec, data = fc.render_photo_case(self.ctx, self.ranker, row, self.settings)
+        return (spec, spec.material_by_index(), data) if data.rows else None
 
     def winners(self, data: PairData, truth: Mapping[int, int]) -> tuple[dict[str, dict[int, int]], dict, float]:
         """The fit's and the truth's winner per observed part, the lighting estimate and the winners' exposure."""

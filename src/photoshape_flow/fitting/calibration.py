@@ -96,11 +96,12 @@ class RenderRanker:
                 for index, part in zip(indices, ranked, strict=True)}
 
 
-def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Settings,
-                 photo_size: int | None = None) -> tuple[list[cal.Case], dict[str, int]]:
-    """The calibration cases of one validation render, and counts (parts observed, true among candidates).
-
-    `photo_size`: the side the photo is degraded at (None: the render's own).
+def render_photo_case(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Settings,
+                      photo_size: int | None = None) -> tuple[RenderSpec, PairData]:
+    """One validation render as the stage sees an exemplar: its spec and a transient pair (never added)
+    whose scene is the render degraded, framed and misaligned (`calibration_photo`, seeded by the
+    render's key) and whose rows are the classifier's ranking of each observed region (empty when
+    none could be ranked). `photo_size`: the side the photo is degraded at (None: the render's own).
     """
     spec = RenderSpec.from_dict(row.params)
     truth = spec.material_by_index()
@@ -116,11 +117,21 @@ def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Set
     present = sorted(int(i) for i in np.unique(labels) if i > 0 and int(i) in truth)
     scene = FitScene.from_photo(mesh, camera, rgb, labels, present, ctx.cfg.erode, blur=ctx.cfg.blur,
                                 foreground=foreground, features=ctx.features)
-    counts = {"parts": len(scene.masks), "true_in_candidates": 0}
     rows = ranker.rank(rgb, {i: (labels == i) & foreground for i in scene.masks})
-    if not rows:
+    return spec, PairData(m.Pair(shape_id=row.shape_id), scene, rows, None)
+
+
+def render_cases(ctx: Any, ranker: RenderRanker, row: m.Rendering, settings: Settings,
+                 photo_size: int | None = None) -> tuple[list[cal.Case], dict[str, int]]:
+    """The calibration cases of one validation render, and counts (parts observed, true among candidates).
+
+    `photo_size`: the side the photo is degraded at (None: the render's own).
+    """
+    spec, data = render_photo_case(ctx, ranker, row, settings, photo_size)
+    truth, scene = spec.material_by_index(), data.scene
+    counts = {"parts": len(scene.masks), "true_in_candidates": 0}
+    if not data.rows:
         return [], counts
-    data = PairData(m.Pair(shape_id=row.shape_id), scene, rows, None)  # transient: never added
     light = lighting_estimate(ctx, data)
     candidates = candidates_of(ctx, data)
     if not candidates:
