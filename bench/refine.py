@@ -9,9 +9,10 @@ with its three textured materials (albedo, roughness and normal maps) under its 
 known `Refinement` (tint 0.75-1.35 per channel, roughness x0.7-1.4, UV scale 0.7/1/1.4),
 path-traced at 128 px and 64 spp, exposed by 0.8, its part map shifted by one pixel (alignment is
 never exact). Refinement starts from the unadjusted materials with the medium profile's settings
-(`FitConfig`: the fit's 128 px frame at `refine_spp` 4 for the UV search, gradient frame 64 px,
-a warm start and 8 Adam steps at 4 spp) and is timed per pair; making the photos is not
-(subtracted from the process's time too).
+(`FitConfig`: the tint solved like for like at the fit's 128 px frame; the UV search at `refine_spp`
+4 and the Adam steps on the roughness at a 64 px frame only when asked, ``--set uv=1 --set
+iterations=8``, as `fit.refine_uv` / `fit.refine_iterations` do) and is timed per pair; making the
+photos is not (subtracted from the process's time too).
 
 The probe runs in a fresh process (`--probe`), so the first pair pays the imports, Mitsuba's start
 and the kernels' compilation: with the Dr.Jit kernel cache on disk as a worker finds it, and with
@@ -48,7 +49,9 @@ def _bench_render() -> object:
 
 
 def overrides(items: list[str]) -> dict[str, float]:
-    return {name: float(value) for name, value in (item.split("=", 1) for item in items)}
+    """NAME=VALUE pairs: whole numbers as int (iterations, uv as 0/1), others as float."""
+    return {name: int(value) if value.lstrip("-").isdigit() else float(value)
+            for name, value in (item.split("=", 1) for item in items)}
 
 
 def probe(pairs: int, settings_overrides: dict[str, float] | None = None, uv_spp: int | None = None) -> dict:
@@ -56,8 +59,9 @@ def probe(pairs: int, settings_overrides: dict[str, float] | None = None, uv_spp
 
     import numpy as np
 
-    from photoshape_flow.fit.refine import RefineSettings, refine_parts
+    from photoshape_flow.fit.refine import refine_parts
     from photoshape_flow.fit.scene import FitScene, FrameRenderer
+    from photoshape_flow.fitting.refine import refine_settings
     from photoshape_flow.profiles import PROFILES
     from photoshape_flow.render import Refinement, Renderer
     from photoshape_flow.render.specs import linear_to_srgb
@@ -84,7 +88,7 @@ def probe(pairs: int, settings_overrides: dict[str, float] | None = None, uv_spp
                                         [p.index for p in shape.parts], cfg.erode, blur=cfg.blur,
                                         foreground=ids > 0)
             photo_s = time.perf_counter() - photo_started
-            settings = RefineSettings(iterations=cfg.refine_iterations, spp=cfg.refine_spp, erode=cfg.erode)
+            settings = refine_settings(cfg)
             settings = replace(settings, **(settings_overrides or {}))
             started = time.perf_counter()
             result = refine_parts(FrameRenderer(renderer, cfg.refine_size, cfg.refine_spp), scene, materials,

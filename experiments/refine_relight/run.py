@@ -8,8 +8,9 @@ shapes under val envmaps, the library's materials, each part's truth known) beco
 calibration makes it (`fitting.calibration.render_photo_case` at the render's own size): degraded
 like an exemplar, part map misaligned as fine alignment errs. The
 stage's own steps then run on it: candidates, the lighting estimate over the training envmaps, the
-selection (the profile's calibrated weights) and the refinement of the winners under that lighting
-(`fit.refine.refine_parts`, the stage's settings). Winner sets (`--winners`):
+selection (the classifier's calibrated weights, `fitting.calibration.ensure_calibration`) and the
+refinement of the winners under that lighting (`fit.refine.refine_parts`, the stage's settings).
+Winner sets (`--winners`):
 
     fit     the selection's winners, as the stage refines them
     truth   every part's true material: the ideal refinement is then the identity, so whatever it
@@ -18,8 +19,8 @@ selection (the profile's calibrated weights) and the refinement of the winners u
 Each winner set is relit as `photoshape eval` relights a pair (`scoring.relighting_eval`): the
 render's shape from three novel views (camera turned 90, 180, 270 degrees) under a held-out envmap,
 silhouette RMSE (sRGB) against the same views with the true materials. Arms per winner set:
-`unrefined`, `refined` (as stored), `no-tint` (the refinement without its tint), `tint-only`
-(only the tint) and `tint-norm` (the tints divided by their luminance-weighted geometric mean over
+`unrefined`, `refined` (as stored), `no-tint` (the refinement without its tint), `uv-only`,
+`tint-only` (only the tint) and `tint-norm` (the tints divided by their luminance-weighted geometric mean over
 the pair's refined parts: one photo cannot tell the albedo's level from the exposure's). Per arm:
 mean RMSE over renders and its difference from `unrefined` with a 95% bootstrap interval over renders.
 
@@ -66,6 +67,10 @@ def tint_only(refined: Refinements) -> Refinements:
     return {i: {"tint": r["tint"]} for i, r in refined.items()}
 
 
+def uv_only(refined: Refinements) -> Refinements:
+    return {i: {**r, "tint": [1.0, 1.0, 1.0], "roughness_scale": 1.0} for i, r in refined.items()}
+
+
 def tint_normalised(refined: Refinements) -> Refinements:
     """Tints divided by their common level: the geometric mean of their luminances over the refined parts."""
     if not refined:
@@ -76,7 +81,7 @@ def tint_normalised(refined: Refinements) -> Refinements:
 
 
 ARMS: dict[str, Callable[[Refinements], Refinements] | None] = {
-    "unrefined": None, "refined": lambda r: r, "no-tint": no_tint, "tint-only": tint_only,
+    "unrefined": None, "refined": lambda r: r, "no-tint": no_tint, "uv-only": uv_only, "tint-only": tint_only,
     "tint-norm": tint_normalised,
 }
 
@@ -84,13 +89,16 @@ ARMS: dict[str, Callable[[Refinements], Refinements] | None] = {
 class Experiment:
     """A data root's fit context; `measure` runs one validation render through fit, refinement and relighting."""
 
-    def __init__(self, profile: str, overrides: list[str], size: int, spp: int):
+    def __init__(self, profile: str, overrides: list[str], size: int, spp: int, arms: list[str] | None = None):
+        self.arms = ["unrefined", *[a for a in (arms or list(ARMS)) if a != "unrefined"]]
         self.settings = get_settings()
         self.cfg = resolve_profile(profile, overrides).profile.fit
         self.store = BlobStore(self.settings.blob_root)
         with session_scope(self.settings.resolved_database_url) as session:
             self.ctx = FitContext(session, self.store, resolve_classifier(session, None), self.cfg)
             self.relighter = Relighter(session, self.store, size, spp)
+        # the stage's fitted weights (stored by the fit stage's calibration; fitted now when missing)
+        self.ctx.calibration = fc.ensure_calibration(self.ctx, self.settings)
         self.ranker = fc.RenderRanker(self.ctx, self.settings)
 
     def photo_case(self, row: m.Rendering) -> tuple[RenderSpec, dict[int, int], PairData] | None:
@@ -137,7 +145,8 @@ class Experiment:
                 materials = {**truth, **{i: chosen[name][i] for i in parts if i in chosen[name]}}
                 refined = self.refine(data, materials, parts, light, exposure)
                 out[f"{name}:tints"] = {str(i): r["tint"] for i, r in refined.items()}
-                for arm, transform in ARMS.items():
+                for arm in self.arms:
+                    transform = ARMS[arm]
                     refinements = transform(refined) if transform else None
                     views = self.relighter.views(session, pair, materials, refinements)
                     values = [silhouette_rmse(p[0], t[0], t[1] | p[1]) for p, t in zip(views, true_views, strict=True)]
@@ -180,14 +189,15 @@ def gaps(experiment: Experiment, renders: list[m.Rendering]) -> dict[str, list[f
     return {k: [round(float(x), 3) for x in np.mean(v, axis=0)] for k, v in ratios.items()}
 
 
-def summarise(records: list[dict[str, Any]], winner_sets: list[str], seed: int = 0) -> dict[str, Any]:
+def summarise(records: list[dict[str, Any]], winner_sets: list[str], arms: list[str],
+              seed: int = 0) -> dict[str, Any]:
     """Mean relit RMSE per arm and its paired difference from `unrefined` (95% interval over renders)."""
     rng = np.random.default_rng(seed)
     groups = np.arange(len(records))
     table: dict[str, Any] = {}
     for name in winner_sets:
         base = np.array([r[f"{name}:unrefined"] for r in records])
-        for arm in ARMS:
+        for arm in arms:
             values = np.array([r[f"{name}:{arm}"] for r in records])
             diff = values - base
             table[f"{name}:{arm}"] = {"rmse": round(float(values.mean()), 4),
@@ -202,12 +212,13 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], help="profile override, e.g. fit.refine_iterations=4")
     parser.add_argument("--cases", type=int, default=None, help="validation renders (default: the profile's)")
     parser.add_argument("--winners", default="fit,truth")
+    parser.add_argument("--arms", default="", help=f"comma-separated, of {', '.join(ARMS)} (default: all)")
     parser.add_argument("--size", type=int, default=128, help="relit render size (the evaluation's)")
     parser.add_argument("--spp", type=int, default=32)
     parser.add_argument("--gaps", action="store_true",
                         help="only the true materials' photo/render gap per channel (`gaps`), then exit")
     args = parser.parse_args()
-    experiment = Experiment(args.profile, args.set, args.size, args.spp)
+    experiment = Experiment(args.profile, args.set, args.size, args.spp, args.arms.split(",") if args.arms else None)
     winner_sets = args.winners.split(",")
     count = args.cases if args.cases is not None else experiment.cfg.calibration_cases
     settings = experiment.settings
@@ -229,7 +240,7 @@ def main() -> None:
             print(json.dumps({k: v for k, v in record.items() if not k.endswith(":tints")}), flush=True)
     results = {"profile": args.profile, "overrides": args.set, "renders": len(records),
                "fit_top1": round(float(np.nanmean([r["fit_top1"] for r in records])), 4),
-               "arms": summarise(records, winner_sets), "records": records}
+               "arms": summarise(records, winner_sets, experiment.arms), "records": records}
     print(json.dumps(results["arms"], indent=1))
     out = results_dir(settings, "refine_relight")
     out.mkdir(parents=True, exist_ok=True)

@@ -143,12 +143,13 @@ class FitConfig:
     #                                 "none": no term, no read (measured level on both worlds: D54)
     prior_weight: float = 0.3  # times -log(ranking prior)
     prior_floor: float = 0.02  # prior of candidates the ranking did not propose
-    # refinement of the winners (`fit.refine`, D35): only for the pairs publish uses. Off: its loss
-    # ignores the selection's silhouette blending (D41), and validation renders relit worse (D66)
+    # refinement of the winners (`fit.refine`, D35): only for the pairs publish uses; each part's tint solved
+    # like for like (D67). Off: validation renders relit worse (D66)
     refine: bool = False
     refine_max_rank: int = 12  # pairs up to this rank per shape (keep equal to publish.max_rank) and each
     #                            exemplar's best pair are refined; the others keep the selection
-    refine_iterations: int = 8  # Adam steps (after a closed-form warm start) on the tint and roughness scale
+    refine_iterations: int = 0  # Adam steps on the roughness scale (0: kept; it relit worse, D67)
+    refine_uv: bool = False  # search each textured part's UV scale and rotation (relit worse, D67)
     refine_spp: int = 4  # per gradient render (a new seed each step) and per UV-search render
     refine_size: int = 64  # gradient renders' frame (its loss is region statistics: resolution matters little)
     calibration_cases: int = 48  # validation renders the weights are fitted on (0: the hand-set weights)

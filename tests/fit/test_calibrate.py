@@ -78,3 +78,21 @@ def test_the_calibration_keeps_the_model_with_the_lowest_held_out_loss() -> None
     scaled = refit("hand_set_temperature", cases, base)
     assert np.allclose(np.asarray(scaled.weights), base / base.sum())
     assert scaled.temperature == pytest.approx(fit_temperature(cases, base) / base.sum())
+
+
+def test_the_fit_calibrations_key_ignores_the_refinements_settings_and_follows_the_selections() -> None:
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from photoshape_flow.db import models as m
+    from photoshape_flow.fitting.calibration import calibration_key
+    from photoshape_flow.profiles import FitConfig
+
+    def key(cfg: FitConfig) -> str:
+        ctx = SimpleNamespace(params={"code": "fit-9"}, cfg=cfg, material_substance={1: "wood"},
+                              envmaps={1: "studio"}, classifier=m.Classifier(checkpoint_blob="ab", metrics={}))
+        return calibration_key(ctx, [], 0)
+
+    plain = FitConfig()
+    assert key(replace(plain, refine=True, refine_uv=True, refine_iterations=8)) == key(plain)
+    assert key(replace(plain, top_k=3)) != key(plain)

@@ -18,6 +18,7 @@ from photoshape_flow.fit.refine import (
     RefineSettings,
     RegionLoss,
     choose_uv,
+    like_for_like_tints,
     orientation,
     refine_parts,
     region_loss,
@@ -62,6 +63,31 @@ def test_the_differentiable_region_loss_equals_region_statistics_in_numpy() -> N
         expected.append(np.sum(((1.3 * pixels.mean(axis=0) - targets[i][0]) / level) ** 2) / 3.0
                         + 0.5 * np.sum(((1.3 * std - targets[i][1]) / level) ** 2) / 3.0)
     assert np.allclose(np.array(per_part, np.float64), expected, rtol=1e-4)
+
+
+def test_like_for_like_tints_recover_a_tint_where_the_photo_mixes_a_thin_part_with_the_background() -> None:
+    from photoshape_flow.fit.scene import FitScene
+
+    ids = np.zeros((40, 40), np.int64)
+    ids[8:32, 6:26] = 1  # a panel
+    ids[8:32, 30:32] = 2  # a leg two pixels wide: blurred, most of its photo region is background
+    rgba = np.zeros((40, 40, 4), np.float32)
+    rgba[ids == 1] = (0.30, 0.25, 0.20, 1.0)
+    rgba[ids == 2] = (0.10, 0.08, 0.06, 1.0)
+    tint = np.array([1.4, 0.9, 0.7], np.float32)
+    tinted = rgba.copy()
+    tinted[ids == 1, :3] *= tint
+    scene = FitScene(None, None, np.zeros((40, 40, 3), np.float32), None, {1: ids == 1, 2: ids == 2}, blur=1.0,
+                     background=np.array([0.9, 0.9, 0.95], np.float32))
+    scene.photo_linear = scene.exposed_linear(tinted, 0.8)
+    tints = like_for_like_tints(scene, rgba, ids, [1, 2], 0.8, (0.5, 2.0), 0.5)
+    assert tints[1] == pytest.approx(tuple(tint), rel=1e-3)
+    assert tints[2] == pytest.approx((1.0, 1.0, 1.0), rel=1e-3)
+    # what reading the leg's render inside its own region against the photo's region would ask for
+    own = scene.photo_linear[ids == 2].mean(0) / (0.8 * rgba[ids == 2, :3].mean(0))
+    assert own.min() > 2.0
+    # a part whose photo region shows mostly something else is left out
+    assert 2 not in like_for_like_tints(scene, rgba, np.where(ids == 2, 0, ids), [1, 2], 0.8, (0.5, 2.0), 0.5)
 
 
 def test_orientation_turns_twice_as_fast_as_stripes() -> None:

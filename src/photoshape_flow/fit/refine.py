@@ -4,6 +4,9 @@ The library holds a finite set of materials; the photo's is usually a little lig
 glossier or more finely patterned than the nearest one. So each refined part keeps its chosen
 material and fits four numbers (a `render.specs.Refinement`), never texels:
 
+The stage fits only the tint by default (`FitConfig.refine_uv` and `refine_iterations` turn the UV
+search and the roughness steps on): on validation renders both relit worse (docs/decisions.md D67).
+
 - **UV scale and rotation** by a small search of forward renders (`uv_search`): Mitsuba's UV
   transform has no gradients, and the loss is periodic in both. A coordinate search: every scale
   unrotated, then every rotation at each part's best scale (5 + 3 renders for the default grid,
@@ -13,20 +16,23 @@ material and fits four numbers (a `render.specs.Refinement`), never texels:
   measure; on the two-box test the rotation is found without it too, so its weight is
   unmeasured). Identity wins ties within `uv_margin`, so an untextured or isotropic material is
   not rotated at random.
-- **Albedo tint** (3 values, log space) and **roughness scale** (log space) by Adam on Mitsuba's
-  ``llvm_ad_rgb`` gradients (`render.gradients.GradientScene`), clamped to `tint_range` and
-  `roughness_range`. The loss is per part, over the rendered part's eroded region: the relative L2
-  of the mean linear colour after the stage's exposure against the photo region's mean, plus
-  `std_weight` x the same for the per-channel standard deviation (the light structural term:
-  highlights and texture contrast, which roughness moves). Region statistics, not pixels, for the
-  reason of docs/decisions.md D32: alignment is off by a few pixels. The tint starts where the
-  first render's region means say it should if radiance were linear in the albedo (`warm_start`),
-  so a few Adam steps suffice (they correct interreflections, clipping and the std term); a new
-  seed every step, low spp: Adam averages the noise.
+- **Albedo tint** (3 values) in closed form (`like_for_like_tints`): the render shown as the
+  selection shows it (over the photo's background at the silhouette, softened) and read in the
+  photo's regions, where it is affine in each part's tint; clamped to `tint_range`. The tint used
+  to be fitted by Adam on the loss below, which reads each part inside its own rendered region:
+  the photo's region there is mixed with the background near the silhouette (most of a thin
+  part), and the tint brightened the parts to match; it relit worse (docs/decisions.md D66, D67).
+- **Roughness scale** (log space) by Adam on Mitsuba's ``llvm_ad_rgb`` gradients
+  (`render.gradients.GradientScene`), the tints held, clamped to `roughness_range`. The loss is
+  per part, over the rendered part's eroded region: the relative L2 of the mean linear colour
+  after the stage's exposure against the photo region's mean, plus `std_weight` x the same for the
+  per-channel standard deviation (the light structural term: highlights and texture contrast,
+  which roughness moves). Region statistics, not pixels, for the reason of docs/decisions.md D32:
+  alignment is off by a few pixels. A new seed every step, low spp: Adam averages the noise.
 
 All parts are refined in the same renders. `refine_parts` returns, per part, the refinement and the
-gradient loss before and after (both at seed 0, so the noise is the same; "before" already has the
-searched UV placement, whose own gain is in ``uv_cost``: identity's and the chosen point's).
+gradient loss before (the library's material, UV placed) and after (both at seed 0, so the noise is
+the same; the UV placement's own gain is in ``uv_cost``: identity's and the chosen point's).
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from photoshape_flow.fit.appearance import Region, Weights, appearance, distance, erode
+from photoshape_flow.fit.appearance import Region, Weights, appearance, distance, erode, soften
 from photoshape_flow.render.specs import Refinement
 
 TEXTURED = ("albedo", "roughness", "normal")  # maps whose placement the UV transform moves
@@ -57,9 +63,11 @@ class RefineSettings:
     roughness_range: tuple[float, float] = (0.5, 2.0)
     std_weight: float = 0.25
     roughness_prior: float = 0.0  # x sum of squared log roughness scales: stay at 1 without support
+    uv: bool = True  # search the UV placement (`uv_search`)
     uv_scales: tuple[float, ...] = (0.5, 0.7, 1.0, 1.4, 2.0)
     uv_rotations: tuple[float, ...] = (0.0, 45.0, 90.0, 135.0)  # degrees
     uv_margin: float = 0.03  # a UV hypothesis must beat identity by this fraction of its cost
+    tint_overlap: float = 0.5  # a part's tint needs this share of its photo region covered by its render
     orientation_weight: float = 1.0
     max_depth: int = 3
     erode: int = 1
@@ -100,6 +108,37 @@ def region_loss(mean: np.ndarray, std: np.ndarray, target: tuple[np.ndarray, np.
                  + std_weight * np.mean(((exposure * std - t_std) / level) ** 2))
 
 
+def like_for_like_tints(scene: Any, rgba: np.ndarray, ids: np.ndarray, parts: Sequence[int], exposure: float,
+                        bounds: tuple[float, float], min_overlap: float) -> dict[int, tuple[float, float, float]]:
+    """Each part's albedo tint that makes the selection's comparison hold, solved in closed form.
+
+    The render (`FitScene.render` at the scene's size, `ids` its part map) is shown as the selection
+    shows it (`FitScene.exposed_linear`: at `exposure`, over the photo's background at the
+    silhouette, softened like the photo) and read in the *photo's* regions, so near the silhouette
+    both sides hold the same mixture with the background; a thin part's photo region is mostly that
+    mixture, and a tint fitted to it otherwise brightens the part (docs/decisions.md D66). With one
+    bounce that image is affine in each part's tint, so per channel the tints solve a small
+    least-squares system (region i's mean = the photo's mean there), then are clamped to `bounds`.
+    A part whose photo region holds less than `min_overlap` of its own rendered coverage is left
+    out (tint 1): the region shows something else.
+    """
+    alpha = rgba[..., 3]
+    coverage = {j: soften((alpha * (ids == j)).astype(np.float32), scene.blur) for j in parts}
+    kept = [i for i in parts if i in scene.masks and float(coverage[i][scene.masks[i]].mean()) >= min_overlap]
+    if not kept:
+        return {}
+    shown = {j: soften((rgba[..., :3] * (alpha * exposure * (ids == j))[..., None]).astype(np.float32), scene.blur)
+             for j in kept}
+    whole = scene.exposed_linear(rgba, exposure)
+    tints = np.ones((len(kept), 3))
+    for c in range(3):
+        matrix = np.array([[float(shown[j][..., c][scene.masks[i]].mean()) for j in kept] for i in kept])
+        target = np.array([float(scene.photo_linear[..., c][scene.masks[i]].mean()) for i in kept])
+        rest = np.array([float(whole[..., c][scene.masks[i]].mean()) for i in kept]) - matrix.sum(axis=1)
+        tints[:, c] = np.clip(np.linalg.lstsq(matrix, target - rest, rcond=None)[0], *bounds)
+    return {i: (float(tints[k, 0]), float(tints[k, 1]), float(tints[k, 2])) for k, i in enumerate(kept)}
+
+
 def orientation(lab: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The region's dominant texture orientation as a doubled-angle vector in the unit disc.
 
@@ -125,16 +164,6 @@ def choose_uv(costs: Mapping[tuple[float, float], float], margin: float) -> tupl
     if identity in costs and costs[best] > (1.0 - margin) * costs[identity]:
         return identity
     return best
-
-
-def warm_start(target: np.ndarray, rendered: np.ndarray, exposure: float,
-               bounds: tuple[float, float]) -> list[float]:
-    """Log tint that makes a region's exposed mean colour the photo's if radiance were linear in the
-    albedo (one bounce): log(target / (exposure * rendered)), clamped. Adam starts here and corrects
-    what the assumption misses (interreflections, clipped texels, the std term)."""
-    ratio = np.asarray(target, np.float64) / np.maximum(exposure * np.asarray(rendered, np.float64), 1e-6)
-    low, high = log_range(bounds)
-    return [float(np.clip(math.log(max(r, 1e-6)), low, high)) for r in ratio]
 
 
 def log_range(bounds: tuple[float, float]) -> tuple[float, float]:
@@ -252,14 +281,6 @@ class RegionLoss:
             per_part += self.std_weight * dr.square((self.exposure * std - self.t_std[c]) / self.level[c]) / 3.0
         return dr.sum(per_part * self.shares), per_part
 
-    def means(self, image: Any) -> np.ndarray:
-        """(parts, 3) mean linear colour of each part's region in a render (NumPy, no gradients)."""
-        flat = np.array(image, np.float64).reshape(-1, 4)[:, :3]
-        pixels, labels = np.array(self.pixels, np.int64), np.array(self.labels, np.int64)
-        sums = np.zeros((len(self.parts), 3))
-        np.add.at(sums, labels, flat[pixels])
-        return sums / np.array(self.counts, np.float64)[:, None]
-
     def values(self, per_part: Any) -> dict[int, float]:
         return {i: float(v) for i, v in zip(self.parts, np.array(per_part, np.float64).reshape(-1), strict=True)}
 
@@ -281,11 +302,14 @@ def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequen
     if not parts:
         return {}
     targets = region_targets(scene.photo_linear, {i: scene.masks[i] for i in parts})
-    uv = uv_search(uv_frame or frame, scene, materials, parts, envmap, exposure, settings)
+    uv = uv_search(uv_frame or frame, scene, materials, parts, envmap, exposure, settings) if settings.uv else {}
     placed = list(materials)
     for i, ((scale, rotation), _) in uv.items():
         placed[positions[i]] = with_refinement(materials[positions[i]], Refinement(uv_scale=scale,
                                                                                     uv_rotation=rotation))
+    shown = uv_frame or frame  # the scene's size: the tints are read in the photo's regions
+    tints = like_for_like_tints(scene, scene.render(shown, placed, envmap), shown.part_ids(mesh, scene.camera),
+                                parts, exposure, settings.tint_range, settings.tint_overlap)
     ids = frame.render_ids(mesh, scene.camera)
     regions = {i: erode(ids == i, settings.erode) for i in parts}
     parts = [i for i in parts if regions[i].sum() >= 4 and i in targets]
@@ -299,33 +323,28 @@ def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequen
         loss = RegionLoss(mi, labels, parts, targets, exposure, settings.std_weight)
         opt = mi.ad.Adam(lr=settings.learning_rate)
         for i in parts:
-            opt[f"tint_{i}"] = mi.Color3f(0.0)
             opt[f"rough_{i}"] = mi.Float(0.0)
+        fixed = {positions[i]: mi.Color3f(*tints.get(i, (1.0, 1.0, 1.0))) for i in parts}
 
-        def render(seed: int) -> Any:
-            tints = {positions[i]: dr.exp(opt[f"tint_{i}"]) for i in parts}
+        def render(seed: int, tinted: bool = True) -> Any:
             rough = {positions[i]: dr.exp(opt[f"rough_{i}"]) for i in parts}
-            return g.render(tints, rough, settings.spp, seed)
+            return g.render(fixed if tinted else {}, rough, settings.spp, seed)
 
-        with dr.suspend_grad():  # the loss before, and the warm start
-            image = render(0)
-            before = loss.values(loss(image)[1])
-            for i, mean in zip(parts, loss.means(image), strict=True):
-                opt[f"tint_{i}"] = mi.Color3f(*warm_start(targets[i][0], mean, exposure, settings.tint_range))
-        for iteration in range(1, max(1, settings.iterations) + 1):
+        with dr.suspend_grad():  # the loss before: the library's material, placed
+            before = loss.values(loss(render(0, tinted=False))[1])
+        for iteration in range(1, settings.iterations + 1):
             total, _ = loss(render(iteration))
             for i in parts:
                 total += settings.roughness_prior * dr.square(opt[f"rough_{i}"])
             dr.backward(total)
             opt.step()
             for i in parts:
-                opt[f"tint_{i}"] = dr.clip(opt[f"tint_{i}"], *log_range(settings.tint_range))
                 opt[f"rough_{i}"] = dr.clip(opt[f"rough_{i}"], *log_range(settings.roughness_range))
         with dr.suspend_grad():
             after = loss.values(loss(render(0))[1])
         out = {}
         for i in parts:
-            tint = tuple(round(float(math.exp(t)), 6) for t in np.array(opt[f"tint_{i}"], np.float64).reshape(-1)[:3])
+            tint = tuple(round(t, 6) for t in tints.get(i, (1.0, 1.0, 1.0)))
             rough = round(float(math.exp(float(np.array(opt[f"rough_{i}"]).reshape(-1)[0]))), 6)
             (scale, rotation), uv_cost = uv.get(i, ((1.0, 0.0), {}))
             out[i] = PartRefinement(Refinement(tint, rough, scale, rotation),  # type: ignore[arg-type]

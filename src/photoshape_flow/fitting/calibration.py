@@ -183,13 +183,15 @@ def held_out(cases: Sequence[cal.Case], cfg: Any) -> dict[str, Any]:
 
 
 def calibration_key(ctx: Any, renders: Sequence[m.Rendering], seed: int, photo_size: int | None = None) -> str:
-    """What a stored calibration depends on (a change of any re-fits it).
+    """What a stored calibration depends on (a change of any re-fits it): not the refinement's settings.
 
     The classifier's BatchNorm prior and its colour evidence change how it ranks the cases
     (`RenderRanker`); each enters only when set, so older calibrations keep their keys.
     """
     record = Calibration.of(ctx.classifier)
-    return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": dataclasses.asdict(ctx.cfg),
+    # the refinement runs after the selection: its settings do not change what is calibrated
+    config = {k: v for k, v in dataclasses.asdict(ctx.cfg).items() if not k.startswith("refine")}
+    return stable_hash({"code": CODE_VERSION, "fit_code": ctx.params["code"], "config": config,
                         "checkpoint": ctx.classifier.checkpoint_blob, "seed": seed, "photo_size": photo_size,
                         "renders": [[r.kind, r.key, r.params_hash] for r in renders],
                         "materials": sorted(ctx.material_substance), "envmaps": sorted(ctx.envmaps.items()),

@@ -35,12 +35,12 @@ from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import STATUS_OK
 
 METHOD = FIT
-CODE_VERSION = "fit-8"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
+CODE_VERSION = "fit-9"  # fit-2: fitted weights and temperature (D34); fit-3: the highlight term (D38);
 #                         fit-4: renders blended with the photo's background at the silhouette (D41);
 #                         fit-5: each candidate judged at its own best exposure (D42);
 #                         fit-6: weights calibrated on photos degraded at the exemplars' size (D45);
 #                         fit-7: rows carry the calibrated score as their posterior (the gallery's confidence);
-#                         fit-8: the deep texture term (D54)
+#                         fit-8: the deep texture term (D54); fit-9: the refinement's tint solved like for like (D67)
 
 
 def weights_of(cfg: FitConfig) -> Weights:

@@ -18,8 +18,8 @@ For every pair ranked by the newest material classifier (`assignment` rows `clas
 4. Rows `method="fit"`, ``method_key="fit:<classifier id>"``, ranked by cost, next to the
    classifier's and the baselines'. Unobserved parts keep the classifier's ranking (copied).
 5. Refinement (`fitting.refine`, `fit.refine`) of the winners of the pairs that are used
-   (publish's and each exemplar's best): tint, roughness scale, UV scale and rotation on the rank-1
-   rows' ``refinement``.
+   (publish's and each exemplar's best): each part's tint solved against the photo like for like,
+   and, as options, a roughness scale and a UV placement, on the rank-1 rows' ``refinement``.
 
 The run's context and each pair's scene are read by `fitting.context` (shared with the
 calibration). Resumable: each pair's rows carry a hash of the config, the code version, the classifier rows they

@@ -23,7 +23,7 @@ from photoshape_flow.profiles import FitConfig
 
 
 def refine_settings(cfg: FitConfig) -> RefineSettings:
-    return RefineSettings(iterations=cfg.refine_iterations, spp=cfg.refine_spp, erode=cfg.erode)
+    return RefineSettings(iterations=cfg.refine_iterations, spp=cfg.refine_spp, erode=cfg.erode, uv=cfg.refine_uv)
 
 
 def is_refined(session: Session, ctx: Any, pair: m.Pair) -> bool:
