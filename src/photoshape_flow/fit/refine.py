@@ -291,7 +291,8 @@ def refine_parts(frame: Any, scene: Any, materials: Sequence[Any], parts: Sequen
     """Refine the materials of `parts` (part indices; `materials[i]` is `scene.mesh.parts[i]`'s spec).
 
     `frame` renders the gradient loop (its own size: the statistics do not need the fit's), `uv_frame`
-    the UV search at `scene`'s size (default `frame`). Parts without a material (built-in), without a
+    the UV search and the tints' render, both read in the photo's regions, so at `scene`'s size
+    (default `frame`, which must then be that size). Parts without a material (built-in), without a
     photo region or without rendered pixels are left out.
     """
     import drjit as dr
