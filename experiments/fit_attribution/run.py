@@ -17,7 +17,7 @@ weights of the classifier's calibration):
                distance itself knows
     fit-distance      the stage's light and part map, ranked without the prior: what the prior adds
 
-and the table gives material top-1 and substance accuracy per scored part (a part scored as
+and the table gives material top-1 (also per true substance) and substance accuracy per scored part (a part scored as
 `photoshape eval` scores it, against the CRF map) with 95% bootstrap intervals over exemplars, the
 classifier's rank-1 on the same parts, and how often the true material is among the candidates at
 all (the ceiling any distance can reach). Gains of gt-light / gt-mask over fit attribute misses to
@@ -160,6 +160,7 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
             winner = chosen[index]
             figures = obs[name]
             figures["top1"][exemplar.id].append(float(ctx.material_rows[winner].name == material))
+            figures[f"top1:{substance}"][exemplar.id].append(float(ctx.material_rows[winner].name == material))
             figures["substance"][exemplar.id].append(float(ctx.material_substance[winner] == substance))
             names = {ctx.material_rows[c.material_id].name for c in candidates.get(index, [])}
             figures["truth_in_candidates"][exemplar.id].append(float(material in names))
@@ -252,6 +253,11 @@ def main() -> None:
                 vs = "" if not delta or delta["value"] is None else f" [{delta['value']:+.3f}]"
                 cells.append(f"{figure} {cell['value']:.3f}{span}{vs} n={cell['count']}")
         print(f"{name:16s}", " | ".join(cells))
+        by_substance = [f"{figure.split(':', 1)[1]} {cell['value']:.2f} n={cell['count']}"
+                        for figure, cell in row.items()
+                        if figure.startswith("top1:") and not figure.endswith("_vs_fit") and cell["value"] is not None]
+        if by_substance:
+            print(f"{'':16s}  top-1 by true substance: " + ", ".join(by_substance))
     print(counts, f"{results['seconds']} s")
     out = results_dir(settings, "fit_attribution")
     out.mkdir(parents=True, exist_ok=True)
