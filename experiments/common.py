@@ -10,6 +10,7 @@ its output: under the data root it measured, next to the networks the figures be
 
 from __future__ import annotations
 
+from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,12 +21,16 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.color_prior import material_lab_matrix
-from photoshape_flow.config import Settings
+from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.networks.calibrations import material_lab
 from photoshape_flow.networks.classifiers import load_substance_network
 from photoshape_flow.recognition.calibration import fit_color_evidence
 from photoshape_flow.recognition.substance_temperature import substance_temperature
+from photoshape_flow.scoring.evaluate import pair_truths
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCE_LABELS
 
@@ -102,3 +107,38 @@ def load_evidence(session: Session, store: BlobStore, settings: Settings, materi
         network=load_substance_network(net_row, store, "cpu"),
         net_size=int(net_row.config.get("size") or 128),
     )
+
+
+Candidate = tuple[int, str | None, str | None, dict[str, Any]]  # rank, material name, substance, fit params
+ScoredPart = tuple[str, tuple[str, str], list[Candidate]]  # method key, (true material, substance), its rows
+
+
+def scored_rankings(url: str, groundtruth: Path, source: str) -> list[ScoredPart]:
+    """(method key, (true material, true substance), the method's rows best first) per scored part."""
+    store = BlobStore(get_settings().blob_root)
+    out = []
+    with session_scope(url) as session:
+        truths = match_groundtruth(session, read_groundtruth_file(groundtruth), source).truths
+        names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
+        rows = session.execute(
+            sa.select(m.Assignment, m.Part.index).join(m.Part, m.Part.id == m.Assignment.part_id)
+            .join(m.Pair, m.Pair.id == m.Assignment.pair_id)
+            .where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)).all()
+        ranked: dict[tuple[int, int, str], list[Candidate]] = defaultdict(list)
+        for a, index in rows:
+            ranked[(a.pair_id, index, a.method_key)].append(
+                (a.rank, names.get(a.material_id), a.substance, (a.params or {}).get("fit") or {}))
+        by_pair: dict[int, dict[int, tuple[str, str]]] = {}
+        for (pair_id, index, key), candidates in ranked.items():
+            if pair_id not in by_pair:
+                pair = session.get(m.Pair, pair_id)
+                alignment = session.execute(sa.select(m.Alignment).where(
+                    m.Alignment.pair_id == pair_id, m.Alignment.method == "flow-crf",
+                    m.Alignment.status == "ok")).scalar_one_or_none()
+                by_pair[pair_id] = {} if alignment is None else pair_truths(
+                    session, store, pair, session.get(m.Exemplar, pair.exemplar_id), alignment,
+                    truths[pair.exemplar_id])
+            truth = by_pair[pair_id].get(index)
+            if truth is not None:
+                out.append((key, truth, sorted(candidates, key=lambda c: c[0])))
+    return out

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -29,15 +28,10 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from experiments.common import results_dir
+from experiments.fit_attribution.true_scenes import TrueScene, fit_context, true_scenes
 from photoshape_flow.config import get_settings
-from photoshape_flow.db import models as m
-from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-from photoshape_flow.fitting.context import FitContext, load_pair
-from photoshape_flow.networks.classifier_rows import resolve_classifier
-from photoshape_flow.profiles import resolve_profile
+from photoshape_flow.fitting.context import FitContext
 from photoshape_flow.render import EnvmapSpec
-from photoshape_flow.scoring.groundtruth_match import match_groundtruth
-from photoshape_flow.store import BlobStore
 
 TURNS = 24
 
@@ -64,11 +58,12 @@ def shading_agreement(render: np.ndarray, photo: np.ndarray, foreground: np.ndar
     return float(np.corrcoef(rendered, seen)[0, 1])
 
 
-def agreement(ctx: FitContext, scene: Any, materials: list[Any], hdri: Path, scale: float, rotation: float) -> float:
-    """`shading_agreement` of the scene's shape rendered under `hdri` at a turn with the scene's photo."""
-    render = scene.render(ctx.frame, materials, EnvmapSpec(hdri, scale=scale, rotation=rotation))
-    foreground = scene.photo_linear.mean(-1) < 0.9 * float(np.mean(scene.background))
-    return shading_agreement(render, scene.photo_linear, foreground)
+def agreement(ctx: FitContext, scene: TrueScene, light: EnvmapSpec) -> float:
+    """`shading_agreement` of the pair's shape in its true materials under `light` with its photo."""
+    fit_scene = scene.data.scene
+    render = fit_scene.render(ctx.frame, scene.materials, light)
+    foreground = fit_scene.photo_linear.mean(-1) < 0.9 * float(np.mean(fit_scene.background))
+    return shading_agreement(render, fit_scene.photo_linear, foreground)
 
 
 def main() -> None:
@@ -82,38 +77,21 @@ def main() -> None:
     out = results_dir(settings, "fit_attribution")
     flipped = out / "mirrored-envmaps"
     flipped.mkdir(parents=True, exist_ok=True)
-    cfg = replace(resolve_profile("small", []).profile.fit, size=128, spp=32)
     rows: list[dict[str, Any]] = []
     with Session(sa.create_engine(settings.resolved_database_url)) as session:  # read-only
-        ctx = FitContext(session, BlobStore(settings.blob_root), resolve_classifier(session), cfg)
-        by_name = {mat.name: mat.id for mat in ctx.material_rows.values()}
-        truths = match_groundtruth(session, read_groundtruth_file(args.groundtruth), args.source).truths
-        shapes = {(s.source, s.source_id): s.id for s in session.execute(sa.select(m.Shape)).scalars()}
-        pairs = session.execute(sa.select(m.Pair).where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
-                                .order_by(m.Pair.id)).scalars().all()
-        for pair in pairs:
-            truth = truths[pair.exemplar_id]
-            own = shapes.get((truth.shape_ref.source, truth.shape_ref.source_id)) == pair.shape_id
-            if not own or truth.lighting is None or len(rows) >= args.pairs:
-                continue
-            try:
-                data = load_pair(session, ctx, pair)
-            except ValueError:
-                continue
-            names = dict(session.execute(sa.select(m.Part.index, m.Part.name)
-                                         .where(m.Part.shape_id == pair.shape_id)).all())
-            materials = [ctx.spec(by_name.get(truth.parts[names[p.index]].material))
-                         if names.get(p.index) in truth.parts else None for p in data.scene.mesh.parts]
-            path = args.envmap_dir / Path(truth.lighting.envmap).name
-            row: dict[str, Any] = {"exemplar": session.get(m.Exemplar, pair.exemplar_id).source_id,
-                                   "envmap": path.name, "truth_turn": round(math.degrees(truth.lighting.rotation))}
-            for label, hdri in (("given", path), ("mirrored", mirrored(path, flipped))):
-                scores = [agreement(ctx, data.scene, materials, hdri, truth.lighting.scale, 2 * math.pi * k / TURNS)
-                          for k in range(TURNS)]
+        ctx = fit_context(session, settings)
+        for scene in true_scenes(session, ctx, args.groundtruth, args.source, args.envmap_dir):
+            if len(rows) >= args.pairs:
+                break
+            light = scene.truth.lighting
+            assert light is not None
+            row: dict[str, Any] = {"exemplar": scene.exemplar.source_id, "envmap": scene.hdri.name,
+                                   "truth_turn": round(math.degrees(light.rotation))}
+            for label, hdri in (("given", scene.hdri), ("mirrored", mirrored(scene.hdri, flipped))):
+                scores = [agreement(ctx, scene, scene.light(2 * math.pi * k / TURNS, hdri)) for k in range(TURNS)]
                 best = int(np.nanargmax(scores))
                 row[label] = {"agreement": round(scores[best], 3), "turn": round(360 * best / TURNS)}
-            row["truth"] = round(agreement(ctx, data.scene, materials, path, truth.lighting.scale,
-                                           truth.lighting.rotation), 3)
+            row["truth"] = round(agreement(ctx, scene, scene.light()), 3)
             rows.append(row)
             print(row, flush=True)
         session.rollback()

@@ -28,52 +28,17 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
-from experiments.common import results_dir
+from experiments.common import ScoredPart, results_dir, scored_rankings
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.fitting.fit import LIGHTING_KEY
-from photoshape_flow.scoring.evaluate import pair_truths
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
-from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 
-Candidate = tuple[int, str | None, str | None, dict[str, Any]]  # rank, material name, substance, fit params
 
-
-def scored_rankings(url: str, groundtruth: Path, source: str) -> list[tuple[str, tuple[str, str], list[Candidate]]]:
-    """(method key, (true material, true substance), the method's rows best first) per scored part."""
-    store = BlobStore(get_settings().blob_root)
-    out = []
-    with session_scope(url) as session:
-        truths = match_groundtruth(session, read_groundtruth_file(groundtruth), source).truths
-        names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
-        rows = session.execute(
-            sa.select(m.Assignment, m.Part.index).join(m.Part, m.Part.id == m.Assignment.part_id)
-            .join(m.Pair, m.Pair.id == m.Assignment.pair_id)
-            .where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)).all()
-        ranked: dict[tuple[int, int, str], list[Candidate]] = defaultdict(list)
-        for a, index in rows:
-            ranked[(a.pair_id, index, a.method_key)].append(
-                (a.rank, names.get(a.material_id), a.substance, (a.params or {}).get("fit") or {}))
-        by_pair: dict[int, dict[int, tuple[str, str]]] = {}
-        for (pair_id, index, key), candidates in ranked.items():
-            if pair_id not in by_pair:
-                pair = session.get(m.Pair, pair_id)
-                alignment = session.execute(sa.select(m.Alignment).where(
-                    m.Alignment.pair_id == pair_id, m.Alignment.method == "flow-crf",
-                    m.Alignment.status == "ok")).scalar_one_or_none()
-                by_pair[pair_id] = {} if alignment is None else pair_truths(
-                    session, store, pair, session.get(m.Exemplar, pair.exemplar_id), alignment,
-                    truths[pair.exemplar_id])
-            truth = by_pair[pair_id].get(index)
-            if truth is not None:
-                out.append((key, truth, sorted(candidates, key=lambda c: c[0])))
-    return out
-
-
-def by_substance(scored: list[tuple[str, tuple[str, str], list[Candidate]]]) -> dict[str, dict[str, dict[str, float]]]:
+def by_substance(scored: list[ScoredPart]) -> dict[str, dict[str, dict[str, float]]]:
     """Method key -> true substance -> parts, top-1, top-5, substance recall."""
     counts: dict[tuple[str, str], list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     for key, (material, substance), candidates in scored:
@@ -88,7 +53,7 @@ def by_substance(scored: list[tuple[str, tuple[str, str], list[Candidate]]]) -> 
     return dict(out)
 
 
-def fit_losses(scored: list[tuple[str, tuple[str, str], list[Candidate]]]) -> dict[str, dict[str, Any]]:
+def fit_losses(scored: list[ScoredPart]) -> dict[str, dict[str, Any]]:
     """True substance -> fit's parts lost with the truth among its candidates: distance, prior, winners."""
     lost: dict[str, list[tuple[bool, bool, str | None]]] = defaultdict(list)
     for key, (material, substance), candidates in scored:
@@ -107,22 +72,23 @@ def fit_losses(scored: list[tuple[str, tuple[str, str], list[Candidate]]]) -> di
                 "winners": dict(Counter(x[2] for x in xs).most_common())} for s, xs in sorted(lost.items())}
 
 
-def lighting(url: str, groundtruth: Path) -> dict[str, Any]:
+def lighting(url: str, groundtruth: Path, source: str) -> dict[str, Any]:
     """Fit's lighting estimate against the truth's: the chosen envmaps, and rotation errors when right."""
-    truth = {e["source_id"]: e.get("lighting") or {} for e in json.loads(groundtruth.read_text())["exemplars"]}
     chosen: Counter[str] = Counter()
     errors = []
     with session_scope(url) as session:
+        truths = match_groundtruth(session, read_groundtruth_file(groundtruth), source).truths
         names = dict(session.execute(sa.select(m.Envmap.id, m.Envmap.name)).all())
-        for source_id, meta in session.execute(sa.select(m.Exemplar.source_id, m.Exemplar.meta)).all():
-            light = (meta or {}).get(LIGHTING_KEY)
-            if light is None or source_id not in truth:
+        for exemplar_id, truth in truths.items():
+            exemplar = session.get(m.Exemplar, exemplar_id)
+            light = (exemplar.meta or {}).get(LIGHTING_KEY) if exemplar is not None else None
+            if light is None or truth.lighting is None:
                 continue
             name = names.get(light.get("envmap_id"), "none")
-            right = Path(str(truth[source_id].get("envmap", ""))).stem == name
+            right = Path(truth.lighting.envmap).stem == name
             chosen["the truth's" if right else name] += 1
             if right:
-                turn = (float(light["rotation"]) - float(truth[source_id].get("rotation", 0.0))) % (2 * math.pi)
+                turn = (float(light["rotation"]) - truth.lighting.rotation) % (2 * math.pi)
                 errors.append(round(math.degrees(min(turn, 2 * math.pi - turn))))
     return {"chosen": dict(chosen.most_common()), "rotation_error_deg": sorted(errors)}
 
@@ -136,7 +102,7 @@ def main() -> None:
     url = settings.resolved_database_url
     scored = scored_rankings(url, args.groundtruth, args.source)
     results = {"by_substance": by_substance(scored), "fit_losses": fit_losses(scored),
-               "lighting": lighting(url, args.groundtruth)}
+               "lighting": lighting(url, args.groundtruth, args.source)}
     for key, table in results["by_substance"].items():
         print(f"\n{key}: top-1 / top-5 / substance recall (parts)")
         for s in SUBSTANCES:

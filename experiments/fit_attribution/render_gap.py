@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 from collections import defaultdict
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,17 +25,10 @@ from sqlalchemy.orm import Session
 
 from experiments.common import results_dir
 from experiments.fit_attribution.run import truth_part_map
+from experiments.fit_attribution.true_scenes import fit_context, true_scenes
 from photoshape_flow.config import get_settings
-from photoshape_flow.db import models as m
-from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import appearance, soften, terms, to_lab
-from photoshape_flow.fitting.context import FitContext, load_pair
-from photoshape_flow.networks.classifier_rows import resolve_classifier
-from photoshape_flow.profiles import resolve_profile
-from photoshape_flow.render import EnvmapSpec
-from photoshape_flow.scoring.groundtruth_match import match_groundtruth
-from photoshape_flow.store import BlobStore
 
 MIN_PIXELS = 30
 
@@ -48,35 +40,17 @@ def main() -> None:
     parser.add_argument("--source", default="second-world")
     args = parser.parse_args()
     settings = get_settings()
-    cfg = replace(resolve_profile("small", []).profile.fit, size=128, spp=32)
     gaps: dict[str, list[list[float]]] = defaultdict(list)
     with Session(sa.create_engine(settings.resolved_database_url)) as session:  # read-only
-        ctx = FitContext(session, BlobStore(settings.blob_root), resolve_classifier(session), cfg)
-        by_name = {mat.name: mat.id for mat in ctx.material_rows.values()}
-        truths = match_groundtruth(session, read_groundtruth_file(args.groundtruth), args.source).truths
-        shapes = {(s.source, s.source_id): s.id for s in session.execute(sa.select(m.Shape)).scalars()}
-        pairs = session.execute(sa.select(m.Pair).where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude)
-                                .order_by(m.Pair.id)).scalars().all()
-        for pair in pairs:
-            truth = truths[pair.exemplar_id]
-            own = shapes.get((truth.shape_ref.source, truth.shape_ref.source_id)) == pair.shape_id
-            if not own or truth.lighting is None:
-                continue
-            try:
-                data = load_pair(session, ctx, pair)
-            except ValueError:
-                continue
-            names = dict(session.execute(sa.select(m.Part.index, m.Part.name)
-                                         .where(m.Part.shape_id == pair.shape_id)).all())
-            labels = truth_part_map(truth, session.get(m.Exemplar, pair.exemplar_id),
-                                    {name: index for index, name in names.items() if name}, cfg.size)
+        ctx = fit_context(session, settings)
+        blur = ctx.cfg.blur
+        for scene in true_scenes(session, ctx, args.groundtruth, args.source, args.envmap_dir):
+            truth, names, data = scene.truth, scene.names, scene.data
+            labels = truth_part_map(truth, scene.exemplar, {name: index for index, name in names.items() if name},
+                                    ctx.cfg.size)
             if labels is None:
                 continue
-            materials = [ctx.spec(by_name.get(truth.parts[names[p.index]].material))
-                         if names.get(p.index) in truth.parts else None for p in data.scene.mesh.parts]
-            light = EnvmapSpec(args.envmap_dir / Path(truth.lighting.envmap).name, scale=truth.lighting.scale,
-                               rotation=truth.lighting.rotation)
-            rgba = data.scene.render(ctx.frame, materials, light)
+            rgba = data.scene.render(ctx.frame, scene.materials, scene.light())
             alpha, photo = rgba[..., 3:4], data.scene.photo_linear
             masks = {i: mask for i in names if names[i] in truth.parts
                      and (mask := (labels == i) & (alpha[..., 0] > 0.95)).sum() >= MIN_PIXELS}
@@ -84,8 +58,8 @@ def main() -> None:
             seen = {i: (photo[mask].mean(0), int(mask.sum())) for i, mask in masks.items()}
             scale = lt.exposure(rendered, seen)
             shown = rgba[..., :3] * alpha * scale + (1.0 - alpha) * data.scene.background
-            render_lab = to_lab(lt.exposed_srgb(soften(shown, cfg.blur), 1.0))
-            photo_lab = to_lab(lt.exposed_srgb(soften(photo, cfg.blur), 1.0))
+            render_lab = to_lab(lt.exposed_srgb(soften(shown, blur), 1.0))
+            photo_lab = to_lab(lt.exposed_srgb(soften(photo, blur), 1.0))
             for i, mask in masks.items():
                 a, b = appearance(render_lab, mask), appearance(photo_lab, mask)
                 if a is not None and b is not None:

@@ -14,41 +14,18 @@ import argparse
 from collections import Counter, defaultdict
 from pathlib import Path
 
-import sqlalchemy as sa
-
+from experiments.common import scored_rankings
 from photoshape_flow.config import get_settings
-from photoshape_flow.db import models as m
-from photoshape_flow.db.session import session_scope
-from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
-from photoshape_flow.scoring.evaluate import pair_truths
-from photoshape_flow.scoring.groundtruth_match import match_groundtruth
-from photoshape_flow.store import BlobStore
 from photoshape_flow.vocab import SUBSTANCES
 
 
 def confusions(url: str, groundtruth: Path, source: str) -> dict[str, Counter[tuple[str, str]]]:
     """Method key -> Counter of (true substance, rank-1 substance) over the scored parts."""
-    store = BlobStore(get_settings().blob_root)
     out: dict[str, Counter[tuple[str, str]]] = defaultdict(Counter)
-    with session_scope(url) as session:
-        truths = match_groundtruth(session, read_groundtruth_file(groundtruth), source).truths
-        rows = session.execute(
-            sa.select(m.Assignment, m.Part.index).join(m.Part, m.Part.id == m.Assignment.part_id)
-            .join(m.Pair, m.Pair.id == m.Assignment.pair_id)
-            .where(m.Pair.exemplar_id.in_(list(truths)), ~m.Pair.exclude, m.Assignment.rank == 1)).all()
-        by_pair: dict[int, dict[int, tuple[str, str]]] = {}
-        for assignment, index in rows:
-            if assignment.pair_id not in by_pair:
-                pair = session.get(m.Pair, assignment.pair_id)
-                alignment = session.execute(sa.select(m.Alignment).where(
-                    m.Alignment.pair_id == pair.id, m.Alignment.method == "flow-crf",
-                    m.Alignment.status == "ok")).scalar_one_or_none()
-                by_pair[pair.id] = {} if alignment is None else pair_truths(
-                    session, store, pair, session.get(m.Exemplar, pair.exemplar_id), alignment,
-                    truths[pair.exemplar_id])
-            truth = by_pair[assignment.pair_id].get(index)
-            if truth is not None and assignment.substance is not None:
-                out[assignment.method_key][(truth[1], assignment.substance)] += 1
+    for key, (_, substance), candidates in scored_rankings(url, groundtruth, source):
+        rank, _, chosen, _ = candidates[0]
+        if rank == 1 and chosen is not None:
+            out[key][(substance, chosen)] += 1
     return out
 
 
