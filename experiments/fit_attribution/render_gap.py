@@ -15,6 +15,7 @@ starts from, which every wrong candidate has to beat. Read-only. Output:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -29,6 +30,7 @@ from experiments.fit_attribution.true_scenes import fit_context, true_scenes
 from photoshape_flow.config import get_settings
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import appearance, soften, terms, to_lab
+from photoshape_flow.render import Camera
 
 MIN_PIXELS = 30
 
@@ -38,6 +40,8 @@ def main() -> None:
     parser.add_argument("--groundtruth", type=Path, required=True)
     parser.add_argument("--envmap-dir", type=Path, required=True, help="where lighting.envmap names are found")
     parser.add_argument("--source", default="second-world")
+    parser.add_argument("--camera", choices=("pair", "truth"), default="pair",
+                        help="render at the pair's camera (fit's) or at the truth's (the pose error removed)")
     args = parser.parse_args()
     settings = get_settings()
     gaps: dict[str, list[list[float]]] = defaultdict(list)
@@ -50,7 +54,10 @@ def main() -> None:
                                     ctx.cfg.size)
             if labels is None:
                 continue
-            rgba = data.scene.render(ctx.frame, scene.materials, scene.light())
+            fit_scene = data.scene
+            if args.camera == "truth" and truth.camera is not None:
+                fit_scene = dataclasses.replace(fit_scene, camera=Camera.from_dict(dataclasses.asdict(truth.camera)))
+            rgba = fit_scene.render(ctx.frame, scene.materials, scene.light())
             alpha, photo = rgba[..., 3:4], data.scene.photo_linear
             masks = {i: mask for i in names if names[i] in truth.parts
                      and (mask := (labels == i) & (alpha[..., 0] > 0.95)).sum() >= MIN_PIXELS}
@@ -78,7 +85,7 @@ def main() -> None:
               f"{r['lightness']:+.1f}")
     out = results_dir(settings, "fit_attribution")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "render_gap.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / f"render_gap_{args.camera}.json").write_text(json.dumps(summary, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -13,6 +13,8 @@ weights of the classifier's calibration):
     gt-envmap  the truth's envmap file, its rotation and exposure searched as the stage searches its own
     gt-mask    the photo's part regions from the truth's part mask instead of the CRF map
     gt-both    both
+    gt-camera  the candidates rendered at the truth's camera, not the pair's (the pose error removed)
+    gt-camera-light  that and the truth's light; gt-all: camera, light and part mask (-distance: no prior)
     gt-both-distance  both, ranked by the rendered comparison alone (no ranking prior): what the
                distance itself knows
     fit-distance      the stage's light and part map, ranked without the prior: what the prior adds
@@ -29,6 +31,7 @@ Read-only: nothing is written to the database. Output:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from collections import defaultdict
@@ -54,11 +57,13 @@ from photoshape_flow.fitting.fit import candidates_of, exemplar_lighting, select
 from photoshape_flow.networks.classifier_rows import resolve_classifier
 from photoshape_flow.profiles import resolve_profile
 from photoshape_flow.recognition.inference import ALIGNMENT_METHOD
+from photoshape_flow.render import Camera
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.scoring.truths import pair_truths, truth_labels
 from photoshape_flow.store import BlobStore
 
-CONDITIONS = ("fit", "fit-distance", "gt-light", "gt-envmap", "gt-mask", "gt-both", "gt-both-distance")
+CONDITIONS = ("fit", "fit-distance", "gt-light", "gt-envmap", "gt-mask", "gt-both", "gt-both-distance",
+              "gt-camera", "gt-camera-light", "gt-all", "gt-all-distance")
 Observations = dict[str, dict[str, dict[int, list[float]]]]  # condition -> figure -> exemplar -> values
 
 
@@ -103,6 +108,15 @@ def with_labels(ctx: FitContext, data: PairData, labels: np.ndarray, min_pixels:
                                         scene.blur, scene.background, scene.features), data.rows, data.source_hash)
 
 
+def with_camera(data: PairData, truth: TruthEntry) -> PairData | None:
+    """The pair's data with the candidates rendered at the truth's camera instead of the pair's (the photo, its
+    regions and the frame's crop rule unchanged): what the coarse pose costs the comparison."""
+    if truth.camera is None or truth.camera.distance is None or truth.camera.fov is None:
+        return None
+    camera = Camera(truth.camera.azimuth, truth.camera.elevation, truth.camera.distance, truth.camera.fov)
+    return PairData(data.pair, dataclasses.replace(data.scene, camera=camera), data.rows, data.source_hash)
+
+
 def searched(ctx: FitContext, data: PairData, truth_env: Any) -> tuple[Any, float]:
     """The truth's envmap (its file and strength) at the rotation and exposure the stage's own search finds
     for it (`fit.rotations` azimuths, the ranking's first materials): separates "which light" from "how
@@ -141,7 +155,7 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
     # photo's); the truth's envmap at a searched rotation from the search's exposure; the rounds re-solve it
     runs: dict[str, tuple[PairData, Any, float]] = {"fit": (data, None, float(light.get("exposure", 1.0)))}
     runs["fit-distance"] = runs["fit"]
-    distance_only = {"fit-distance", "gt-both-distance"}
+    distance_only = {"fit-distance", "gt-both-distance", "gt-all-distance"}
     if gt_env is not None:
         runs["gt-light"] = (data, gt_env, 1.0)
         runs["gt-envmap"] = (data, *searched(ctx, data, gt_env))
@@ -150,6 +164,14 @@ def score_pair(ctx: FitContext, session: Session, data: PairData, truth: TruthEn
     if gt_env is not None and gt_data is not None:
         runs["gt-both"] = (gt_data, gt_env, 1.0)
         runs["gt-both-distance"] = runs["gt-both"]
+    cam_data = with_camera(data, truth)
+    if cam_data is not None:
+        runs["gt-camera"] = (cam_data, None, float(light.get("exposure", 1.0)))
+        if gt_env is not None:
+            runs["gt-camera-light"] = (cam_data, gt_env, 1.0)
+        if gt_env is not None and gt_data is not None:
+            runs["gt-all"] = (with_camera(gt_data, truth), gt_env, 1.0)
+            runs["gt-all-distance"] = runs["gt-all"]
     classifier_first = {i: rows[0].material_id for i, rows in data.rows.items() if rows}
     for name, (pair_data, envmap, exposure) in runs.items():
         chosen, candidates = winners(ctx, pair_data, {**light, "exposure": exposure}, envmap,
