@@ -129,8 +129,6 @@ class FitConfig:
     rotations: int = 8  # envmap rotations tried per training envmap for the lighting estimate
     lighting_envmaps: int = 4  # more training envmaps than this: screen all at 2 azimuths, search the best 4
     lighting_rounds: int = 1  # 2+: then select, and light the winners again (worse on validation renders: D42)
-    refine_camera: bool = True  # move the pair's coarse pose until the shape's outline covers the photo's
-    #                             (`align.pose`): the second world's pose error 2.1 -> 0.4 degrees (D69)
     erode: int = 1  # pixels shrunk off each part mask before comparing
     blur: float = 1.0  # Gaussian sigma (pixels) applied to the photo and to every render before comparing
     exposure_stops: float = 2.0  # each candidate judged at its best exposure this far either side of the

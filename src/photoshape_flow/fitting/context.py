@@ -17,7 +17,6 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.align.partmap import exemplar_at, resize_labels
-from photoshape_flow.align.pose import refine_camera
 from photoshape_flow.classify.feature_maps import FeatureMaps
 from photoshape_flow.db import models as m
 from photoshape_flow.fit.appearance import Weights
@@ -214,10 +213,7 @@ def load_pair(session: Session, ctx: FitContext, pair: m.Pair) -> PairData:
         source_hash = row.params_hash
     observed = [index for index, part_rows in rows.items() if not part_rows[0].unobserved]
     camera = Camera(float(pair.azimuth), float(pair.elevation), float(pair.camera_distance), float(pair.fov))
-    mesh = ctx.mesh(shape)
-    if ctx.cfg.refine_camera:  # the coarse pose moved to the photo's outline (`align.pose`, D69)
-        camera = refine_camera(lambda c: ctx.frame.part_ids(mesh, c), camera, foreground).camera
-    scene = FitScene.from_photo(mesh, camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
+    scene = FitScene.from_photo(ctx.mesh(shape), camera, rgb, labels, observed, ctx.cfg.erode, blur=ctx.cfg.blur,
                                 foreground=foreground, features=ctx.features)
     return PairData(pair, scene, rows, source_hash)
 
