@@ -1,11 +1,11 @@
-"""Top-1 and substance per method by the part's size in the photo: where each method's misses sit.
+"""Top-1, top-5 and substance per method by the part's size in the photo: where each method's misses sit.
 
     PHOTOSHAPE_DATA_ROOT=/work/w-base python -m experiments.fit_attribution.by_size \\
         --groundtruth ../second-world/groundtruth.json --source second-world
 
 Every scored part (as `photoshape eval` scores it: the truth under the pair's CRF map) of every
 non-excluded pair, binned by its share of the aligned part map (`--bins`), with each method's rank-1
-against the true material and substance. Read-only, seconds; output
+against the true material and substance, and whether the truth is among its first five. Read-only, seconds; output
 `<data root>/experiments/fit_attribution/by_size.json`.
 """
 
@@ -47,7 +47,7 @@ def main() -> None:
     edges = [float(x) for x in args.bins.split(",")]
     settings = get_settings()
     store = BlobStore(settings.blob_root)
-    hits: dict[str, dict[str, list[tuple[bool, bool]]]] = defaultdict(lambda: defaultdict(list))
+    hits: dict[str, dict[str, list[tuple[bool, bool, bool]]]] = defaultdict(lambda: defaultdict(list))
     with session_scope(settings.resolved_database_url) as session:  # read-only
         truths = match_groundtruth(session, read_groundtruth_file(args.groundtruth), args.source).truths
         names = dict(session.execute(sa.select(m.Material.id, m.Material.name)).all())
@@ -61,24 +61,29 @@ def main() -> None:
                 continue
             labels = store.load_image(alignment.crf_blob)
             labels = labels[..., 0] if labels.ndim == 3 else labels
-            first = session.execute(
-                sa.select(m.Assignment, m.Part.index).join(m.Part, m.Part.id == m.Assignment.part_id)
-                .where(m.Assignment.pair_id == pair.id, m.Assignment.rank == 1)).all()
-            for row, index in first:
+            ranked: dict[tuple[str, int], list[m.Assignment]] = defaultdict(list)
+            for row, index in session.execute(
+                    sa.select(m.Assignment, m.Part.index).join(m.Part, m.Part.id == m.Assignment.part_id)
+                    .where(m.Assignment.pair_id == pair.id, m.Assignment.rank <= 5)).all():
                 if index in scored:
-                    label = size_bin(float((labels == index).mean()), edges)
-                    hit = (names.get(row.material_id) == scored[index][0], row.substance == scored[index][1])
-                    method = row.method_key.split(":")[0]
-                    hits[method][label].append(hit)
-                    hits[method]["all"].append(hit)
+                    ranked[(row.method_key.split(":")[0], index)].append(row)
+            for (method, index), rows in ranked.items():
+                rows.sort(key=lambda r: r.rank)
+                material, substance = scored[index]
+                hit = (names.get(rows[0].material_id) == material, rows[0].substance == substance,
+                       any(names.get(r.material_id) == material for r in rows))
+                label = size_bin(float((labels == index).mean()), edges)
+                hits[method][label].append(hit)
+                hits[method]["all"].append(hit)
         session.rollback()
     summary = {method: {label: {"parts": len(v), "top1": round(float(np.mean([h[0] for h in v])), 3),
-                                "substance": round(float(np.mean([h[1] for h in v])), 3)}
+                                "substance": round(float(np.mean([h[1] for h in v])), 3),
+                                "top5": round(float(np.mean([h[2] for h in v])), 3)}
                         for label, v in sorted(by.items())} for method, by in sorted(hits.items())}
-    print("method: per bin of the part's share, top-1 / substance (parts)")
+    print("method: per bin of the part's share, top-1 / top-5 / substance (parts)")
     for method, by in summary.items():
-        print(f"{method:14s}", "  ".join(f"{label} {c['top1']:.3f} / {c['substance']:.3f} (n={c['parts']})"
-                                         for label, c in by.items()))
+        print(f"{method:14s}", "  ".join(f"{label} {c['top1']:.3f} / {c['top5']:.3f} / {c['substance']:.3f} "
+                                         f"(n={c['parts']})" for label, c in by.items()))
     out = results_dir(settings, "fit_attribution")
     out.mkdir(parents=True, exist_ok=True)
     (out / "by_size.json").write_text(json.dumps(summary, indent=2) + "\n")
