@@ -66,7 +66,7 @@ def main() -> None:
                     sa.select(m.Assignment, m.Part.index).join(m.Part, m.Part.id == m.Assignment.part_id)
                     .where(m.Assignment.pair_id == pair.id, m.Assignment.rank <= 5)).all():
                 if index in scored:
-                    ranked[(row.method_key.split(":")[0], index)].append(row)
+                    ranked[(row.method_key, index)].append(row)
             for (method, index), rows in ranked.items():
                 rows.sort(key=lambda r: r.rank)
                 material, substance = scored[index]
