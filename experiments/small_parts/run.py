@@ -25,8 +25,12 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
-from experiments.common import results_dir
-from photoshape_flow.classify.substance_parts import part_substances
+from experiments.common import Evidence, load_evidence, results_dir
+from photoshape_flow.classify.assignment import median_lab
+from photoshape_flow.classify.color_prior import color_likelihood
+from photoshape_flow.classify.ranking import substance_first_order
+from photoshape_flow.classify.substance_calibration import temper
+from photoshape_flow.classify.substance_parts import PartSubstanceResult, part_substances
 from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
@@ -34,7 +38,6 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import difference_interval
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.hashing import item_seed
-from photoshape_flow.networks.classifiers import load_substance_network
 from photoshape_flow.networks.validation_photos import calibration_photo, exemplar_size, validation_renders
 from photoshape_flow.recognition.inference import ALIGNMENT_METHOD
 from photoshape_flow.recognition.substances import resize_probs
@@ -46,12 +49,28 @@ from photoshape_flow.synth.spec import RenderSpec
 Photo = tuple[str, np.ndarray, np.ndarray, dict[int, str]]  # group, RGB uint8, part map, part -> true substance
 
 
-def read(network: Any, size: int, rgb: np.ndarray, labels: np.ndarray, index: int) -> str | None:
+def read(network: Any, size: int, rgb: np.ndarray, labels: np.ndarray, index: int) -> PartSubstanceResult:
     """The stage's vote for part `index` of `labels` from the network's read of `rgb` (any sizes)."""
     probs = substance_map(network, rgb, labels, size)
     if probs.shape[1:] != labels.shape:
         probs = resize_probs(probs, labels.shape)
-    return part_substances(labels, probs, [index])[0].substance
+    return part_substances(labels, probs, [index])[0]
+
+
+def colour_picks(evidence: Evidence, order: list[int], rgb: np.ndarray, labels: np.ndarray, index: int,
+                 vote: PartSubstanceResult) -> dict[str, str]:
+    """The substance of the first pick under D20's rule's alternatives for a small part: colour x the
+    network's calibrated confidence (inference-7, the substance with the most mass first) and the
+    part's colour alone (the material of the nearest colour)."""
+    scale = (rgb.shape[0] / labels.shape[0], rgb.shape[1] / labels.shape[1])
+    ys = np.clip((np.arange(rgb.shape[0]) / scale[0]).astype(int), 0, labels.shape[0] - 1)
+    xs = np.clip((np.arange(rgb.shape[1]) / scale[1]).astype(int), 0, labels.shape[1] - 1)
+    colour = color_likelihood(median_lab(rgb, labels[np.ix_(ys, xs)] == index), evidence.labs, evidence.sigma or 1.0)
+    subs = [evidence.material_substance[i] for i in order]
+    confidence = temper(vote.probs, evidence.temperature)
+    product = colour * np.array([confidence.get(sub, 0.0) for sub in subs])
+    return {"confidence x colour": subs[int(substance_first_order(product, subs)[0])],
+            "colour": subs[int(np.argmax(colour))]}
 
 
 def zoomed(rgb: np.ndarray, labels: np.ndarray, index: int, fill: float) -> tuple[np.ndarray, np.ndarray]:
@@ -104,29 +123,36 @@ def world_photos(session: Any, store: BlobStore, groundtruth: Path, source: str 
                {i: sub for i, (_, sub) in scored.items()})
 
 
-def measure(photos: Iterator[Photo], network: Any, size: int, small: float, fill: float) -> dict[str, Any]:
-    """Substance accuracy of the whole-photo read and the zoomed read on the small parts (paired by photo)."""
-    whole: dict[str, list[float]] = {}
-    zoom: dict[str, list[float]] = {}
+def measure(photos: Iterator[Photo], evidence: Evidence, order: list[int], small: float,
+            fill: float) -> dict[str, Any]:
+    """Substance accuracy on the small parts of the network's whole-photo vote (the stage's, D20), its
+    zoomed vote, and D20's alternatives; each against the vote, paired by photo."""
+    hits: dict[str, dict[str, list[float]]] = {}
     large: list[float] = []
+    network, size = evidence.network, evidence.net_size
     for group, rgb, labels, truth in photos:
         for index, substance in truth.items():
             share = float((labels == index).mean())
             if share == 0.0:
                 continue
-            hit = float(read(network, size, rgb, labels, index) == substance)
+            vote = read(network, size, rgb, labels, index)
             if share >= small:
-                large.append(hit)
+                large.append(float(vote.substance == substance))
                 continue
             crop, crop_labels = zoomed(rgb, labels, index, fill)
-            whole.setdefault(group, []).append(hit)
-            zoom.setdefault(group, []).append(float(read(network, size, crop, crop_labels, index) == substance))
-    diff = difference_interval(zoom, whole)
-    flat = [v for vs in whole.values() for v in vs]
-    return {"small_parts": len(flat), "whole": float(np.mean(flat)) if flat else None,
-            "zoomed": float(np.mean([v for vs in zoom.values() for v in vs])) if flat else None,
-            "zoomed_minus_whole": {"value": diff.value, "low": diff.low, "high": diff.high},
-            "large_parts": len(large), "large_whole": float(np.mean(large)) if large else None}
+            picks = {"network (whole photo)": vote.substance,
+                     "network (zoomed)": read(network, size, crop, crop_labels, index).substance,
+                     **colour_picks(evidence, order, rgb, labels, index, vote)}
+            for rule, pick in picks.items():
+                hits.setdefault(rule, {}).setdefault(group, []).append(float(pick == substance))
+    base = hits.get("network (whole photo)", {})
+    out: dict[str, Any] = {"small_parts": sum(len(v) for v in base.values()), "large_parts": len(large),
+                           "large_whole": float(np.mean(large)) if large else None, "rules": {}}
+    for rule, by in hits.items():
+        diff = difference_interval(by, base)
+        out["rules"][rule] = {"substance": float(np.mean([v for vs in by.values() for v in vs])),
+                              "vs_network": {"value": diff.value, "low": diff.low, "high": diff.high}}
+    return out
 
 
 def main() -> None:
@@ -141,16 +167,19 @@ def main() -> None:
     store = BlobStore(settings.blob_root)
     results: dict[str, Any] = {"small": args.small, "fill": args.fill}
     with session_scope(settings.resolved_database_url) as session:  # read-only
-        newest = max(session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars())
-        row = session.get(m.Classifier, newest)
-        network, size = load_substance_network(row, store, "cpu"), int(row.config.get("size") or 128)
-        results["validation"] = measure(validation_photos(session, store, settings.seed, args.count), network, size,
-                                        args.small, args.fill)
-        print("validation renders", json.dumps(results["validation"]), flush=True)
+        order = sorted(session.execute(sa.select(m.Material.id).where(m.Material.enabled)).scalars())
+        evidence = load_evidence(session, store, settings, order)
+        sets = {"validation renders": validation_photos(session, store, settings.seed, args.count)}
         if args.groundtruth is not None:
-            results["world"] = measure(world_photos(session, store, args.groundtruth, args.source), network, size,
-                                       args.small, args.fill)
-            print("world", json.dumps(results["world"]), flush=True)
+            sets["world"] = world_photos(session, store, args.groundtruth, args.source)
+        for name, photos in sets.items():
+            results[name] = measure(photos, evidence, order, args.small, args.fill)
+            print(f"{name}: {results[name]['small_parts']} small parts; larger parts, network "
+                  f"{results[name]['large_whole']:.3f} ({results[name]['large_parts']})")
+            for rule, cell in results[name]["rules"].items():
+                d = cell["vs_network"]
+                print(f"  {rule:24s} {cell['substance']:.3f}  vs network {d['value']:+.3f} ({d['low']:+.3f}, "
+                      f"{d['high']:+.3f})", flush=True)
         session.rollback()
     out = results_dir(settings, "small_parts")
     out.mkdir(parents=True, exist_ok=True)
