@@ -15,7 +15,6 @@ starts from, which every wrong candidate has to beat. Read-only. Output:
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -25,12 +24,11 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from experiments.common import results_dir
-from experiments.fit_attribution.run import truth_part_map
+from experiments.fit_attribution.run import truth_part_map, with_camera
 from experiments.fit_attribution.true_scenes import fit_context, true_scenes
 from photoshape_flow.config import get_settings
 from photoshape_flow.fit import lighting as lt
 from photoshape_flow.fit.appearance import appearance, soften, terms, to_lab
-from photoshape_flow.render import Camera
 
 MIN_PIXELS = 30
 
@@ -54,10 +52,11 @@ def main() -> None:
                                     ctx.cfg.size)
             if labels is None:
                 continue
-            fit_scene = data.scene
-            if args.camera == "truth" and truth.camera is not None:
-                fit_scene = dataclasses.replace(fit_scene, camera=Camera.from_dict(dataclasses.asdict(truth.camera)))
-            rgba = fit_scene.render(ctx.frame, scene.materials, scene.light())
+            if args.camera == "truth":
+                data = with_camera(data, truth)
+                if data is None:
+                    continue
+            rgba = data.scene.render(ctx.frame, scene.materials, scene.light())
             alpha, photo = rgba[..., 3:4], data.scene.photo_linear
             masks = {i: mask for i in names if names[i] in truth.parts
                      and (mask := (labels == i) & (alpha[..., 0] > 0.95)).sum() >= MIN_PIXELS}

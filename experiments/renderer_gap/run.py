@@ -72,16 +72,13 @@ def compare_scene(renderer: Any, scene: dict[str, Any], truth: dict[str, Any], m
     theirs = srgb_to_linear(rgba[..., :3].astype(np.float64) / 65535.0)
     their_ids = mask_from_render(Path(scene["outputs"]["mask"]), len(scene["parts"]))
     our_ids = renderer.part_ids(mesh, camera, size=size)
-    index = {p.index: p.name for p in mesh.parts}
-    their_index = {p["index"]: p["name"] for p in scene["parts"]}
+    our_index = {p.name: p.index for p in mesh.parts}
     out = {}
-    for k, name in their_index.items():
-        if name not in specs or specs[name] is None:
+    for part in scene["parts"]:
+        name = part["name"]
+        if name not in specs or name not in our_index:
             continue
-        ours_k = [i for i, n in index.items() if n == name]
-        if not ours_k:
-            continue
-        mask = (their_ids == k) & (our_ids == ours_k[0]) & (alpha > 0.99) & (rgba[..., 3] > 65000)
+        mask = (their_ids == part["index"]) & (our_ids == our_index[name]) & (alpha > 0.99) & (rgba[..., 3] > 65000)
         if mask.sum() >= MIN_PIXELS:
             out[name] = part_stats(ours, theirs, mask) | {"material": shown[name]}
     return out

@@ -49,25 +49,32 @@ from photoshape_flow.synth.spec import RenderSpec
 Photo = tuple[str, np.ndarray, np.ndarray, dict[int, str]]  # group, RGB uint8, part map, part -> true substance
 
 
-def read(network: Any, size: int, rgb: np.ndarray, labels: np.ndarray, index: int) -> PartSubstanceResult:
-    """The stage's vote for part `index` of `labels` from the network's read of `rgb` (any sizes)."""
+def read(network: Any, size: int, rgb: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """The network's substance probabilities of `rgb` at the part map's size (any sizes), as the stage reads."""
     probs = substance_map(network, rgb, labels, size)
-    if probs.shape[1:] != labels.shape:
-        probs = resize_probs(probs, labels.shape)
+    return resize_probs(probs, labels.shape) if probs.shape[1:] != labels.shape else probs
+
+
+def vote(labels: np.ndarray, probs: np.ndarray, index: int) -> PartSubstanceResult:
+    """The stage's vote for part `index` (`classify.substance_parts`)."""
     return part_substances(labels, probs, [index])[0]
 
 
-def colour_picks(evidence: Evidence, order: list[int], rgb: np.ndarray, labels: np.ndarray, index: int,
-                 vote: PartSubstanceResult) -> dict[str, str]:
+def labels_at(labels: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The part map at an image's size (nearest pixel), for the part's colour in that image."""
+    ys = np.clip((np.arange(shape[0]) * labels.shape[0] / shape[0]).astype(int), 0, labels.shape[0] - 1)
+    xs = np.clip((np.arange(shape[1]) * labels.shape[1] / shape[1]).astype(int), 0, labels.shape[1] - 1)
+    return labels[np.ix_(ys, xs)]
+
+
+def colour_picks(evidence: Evidence, order: list[int], rgb: np.ndarray, image_labels: np.ndarray, index: int,
+                 network_vote: PartSubstanceResult) -> dict[str, str]:
     """The substance of the first pick under D20's rule's alternatives for a small part: colour x the
     network's calibrated confidence (inference-7, the substance with the most mass first) and the
     part's colour alone (the material of the nearest colour)."""
-    scale = (rgb.shape[0] / labels.shape[0], rgb.shape[1] / labels.shape[1])
-    ys = np.clip((np.arange(rgb.shape[0]) / scale[0]).astype(int), 0, labels.shape[0] - 1)
-    xs = np.clip((np.arange(rgb.shape[1]) / scale[1]).astype(int), 0, labels.shape[1] - 1)
-    colour = color_likelihood(median_lab(rgb, labels[np.ix_(ys, xs)] == index), evidence.labs, evidence.sigma or 1.0)
+    colour = color_likelihood(median_lab(rgb, image_labels == index), evidence.labs, evidence.sigma or 1.0)
     subs = [evidence.material_substance[i] for i in order]
-    confidence = temper(vote.probs, evidence.temperature)
+    confidence = temper(network_vote.probs, evidence.temperature)
     product = colour * np.array([confidence.get(sub, 0.0) for sub in subs])
     return {"confidence x colour": subs[int(substance_first_order(product, subs)[0])],
             "colour": subs[int(np.argmax(colour))]}
@@ -131,18 +138,20 @@ def measure(photos: Iterator[Photo], evidence: Evidence, order: list[int], small
     large: list[float] = []
     network, size = evidence.network, evidence.net_size
     for group, rgb, labels, truth in photos:
+        probs = read(network, size, rgb, labels)  # once per photo, as the stage reads it
+        image_labels = labels_at(labels, rgb.shape)
         for index, substance in truth.items():
             share = float((labels == index).mean())
             if share == 0.0:
                 continue
-            vote = read(network, size, rgb, labels, index)
+            whole = vote(labels, probs, index)
             if share >= small:
-                large.append(float(vote.substance == substance))
+                large.append(float(whole.substance == substance))
                 continue
             crop, crop_labels = zoomed(rgb, labels, index, fill)
-            picks = {"network (whole photo)": vote.substance,
-                     "network (zoomed)": read(network, size, crop, crop_labels, index).substance,
-                     **colour_picks(evidence, order, rgb, labels, index, vote)}
+            picks = {"network (whole photo)": whole.substance,
+                     "network (zoomed)": vote(crop_labels, read(network, size, crop, crop_labels), index).substance,
+                     **colour_picks(evidence, order, rgb, image_labels, index, whole)}
             for rule, pick in picks.items():
                 hits.setdefault(rule, {}).setdefault(group, []).append(float(pick == substance))
     base = hits.get("network (whole photo)", {})
