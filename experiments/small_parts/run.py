@@ -135,7 +135,7 @@ def measure(photos: Iterator[Photo], evidence: Evidence, order: list[int], small
     """Substance accuracy on the small parts of the network's whole-photo vote (the stage's, D20), its
     zoomed vote, and D20's alternatives; each against the vote, paired by photo."""
     hits: dict[str, dict[str, list[float]]] = {}
-    large: list[float] = []
+    large_by: dict[str, list[float]] = {}
     network, size = evidence.network, evidence.net_size
     for group, rgb, labels, truth in photos:
         probs = read(network, size, rgb, labels)  # once per photo, as the stage reads it
@@ -146,7 +146,7 @@ def measure(photos: Iterator[Photo], evidence: Evidence, order: list[int], small
                 continue
             whole = vote(labels, probs, index)
             if share >= small:
-                large.append(float(whole.substance == substance))
+                large_by.setdefault(group, []).append(float(whole.substance == substance))
                 continue
             crop, crop_labels = zoomed(rgb, labels, index, fill)
             picks = {"network (whole photo)": whole.substance,
@@ -155,8 +155,10 @@ def measure(photos: Iterator[Photo], evidence: Evidence, order: list[int], small
             for rule, pick in picks.items():
                 hits.setdefault(rule, {}).setdefault(group, []).append(float(pick == substance))
     base = hits.get("network (whole photo)", {})
+    large = [v for vs in large_by.values() for v in vs]
     out: dict[str, Any] = {"small_parts": sum(len(v) for v in base.values()), "large_parts": len(large),
-                           "large_whole": float(np.mean(large)) if large else None, "rules": {}}
+                           "large_whole": float(np.mean(large)) if large else None, "rules": {},
+                           "by_photo": {"small": hits, "large": large_by}}  # for compare.py
     for rule, by in hits.items():
         diff = difference_interval(by, base)
         out["rules"][rule] = {"substance": float(np.mean([v for vs in by.values() for v in vs])),

@@ -19,6 +19,7 @@ from photoshape_flow.classify.substance_train import (
     confusion_matrix,
     load_model,
     metrics_from_confusion,
+    part_weights,
     predict_substances,
     train_substance_net,
 )
@@ -120,3 +121,51 @@ def test_predict_substances_averages_the_mirrored_view() -> None:
     both = predict_substances(model, image, size=32)
     assert np.allclose(both, 0.5 * (single + mirrored), atol=1e-5)
     assert np.allclose(both.sum(axis=0), 1.0, atol=1e-5)
+
+
+def test_part_weights_give_every_part_the_same_total_weight() -> None:
+    parts = np.zeros((64, 64), np.uint16)
+    parts[:32, :] = 1  # 2048 pixels
+    parts[40:42, :4] = 2  # 8 pixels
+    weights = part_weights(parts, 1.0)
+    assert weights[parts == 1].sum() == pytest.approx(weights[parts == 2].sum(), rel=1e-5)
+    assert weights[parts > 0].mean() == pytest.approx(1.0, rel=1e-5)
+    assert (weights[parts == 0] == 1).all()
+    half = part_weights(parts, 0.5)
+    assert weights[parts == 2][0] > half[parts == 2][0] > 1 > half[parts == 1][0] > weights[parts == 1][0]
+    assert (part_weights(parts, 0.0) == 1).all()
+    sliver = parts.copy()
+    sliver[63, 63] = 3  # one pixel weighs as 1/1024 of the image (4 pixels) would: twice the 8-pixel part
+    assert part_weights(sliver, 1.0)[63, 63] == pytest.approx(2 * part_weights(sliver, 1.0)[40, 0], rel=1e-5)
+
+
+def test_part_maps_follow_the_labels_through_framing_and_augmentation() -> None:
+    data = toy_substances(3, size=40, seed=5)
+    parts = [(label > 0).astype(np.uint16) * (1 + (label % 2)) for label in data.labels]
+    with_parts = SubstanceData(data.images, data.labels, [], parts)
+    framed = with_parts.framed()
+    assert framed.parts is not None
+    config = replace(get_config("tiny"), crop_scale=(0.3, 1.0))
+    rng = np.random.default_rng(0)
+    for image, stack in zip(framed.images, framed.label_stacks(), strict=True):
+        _, out = augment(image, stack, config, rng)
+        assert out.shape == (config.size, config.size, 2)
+        assert ((out[..., 0] > 0) == (out[..., 1] > 0)).all()
+    with pytest.raises(ValueError, match="part maps"):
+        SubstanceData(data.images, data.labels, [], parts[:2])
+
+
+def test_part_balanced_training_needs_part_maps_and_learns() -> None:
+    torch.set_num_threads(2)
+    data = toy_substances(4)
+    config = get_config("tiny", epochs=1, iters_per_epoch=60, lr=1e-2, jitter=0.0, crop_scale=(1.0, 1.0), flip=False,
+                        part_balance=1.0)
+    with pytest.raises(ValueError, match="part maps"):
+        train_substance_net(data, None, config)
+    parts = [label.astype(np.uint16) for label in data.labels]  # each rectangle's label stands for its part
+    result = train_substance_net(SubstanceData(data.images, data.labels, [], parts), None, config)
+    metrics = result.checkpoint["metrics"]
+    assert metrics["loss_last"] < 0.5 * metrics["loss_first"]
+    assert metrics["pixel_accuracy"] > 0.8
+    assert result.checkpoint["config"]["part_balance"] == 1.0
+    assert "part_balance" not in replace(config, part_balance=0.0).to_dict()  # old rows keep their hashes

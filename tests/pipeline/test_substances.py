@@ -164,6 +164,14 @@ def test_substances_stage_end_to_end_and_idempotent(
     assert refit["part_temperature_renders"] == metrics["part_temperature_renders"] + 1
     assert refit["part_temperature_key"] != metrics["part_temperature_key"]
 
+    # a part-balanced loss is another network: trained anew on the bootstrap renders' part maps
+    balanced = run_substances(bootstrap_count=6, size=32, spp=2, train_config="tiny",
+                              train_overrides={"part_balance": 1.0})
+    assert balanced["bootstrap"]["rendered"] == 0 and balanced["network"]["epochs_run"] == [1, 2]
+    with session_scope(db_url) as session:
+        (retrained,) = session.execute(sa.select(m.Classifier)).scalars()
+    assert retrained.config["part_balance"] == 1.0 and retrained.checkpoint_blob != classifier.checkpoint_blob
+
 
 def test_the_part_recogniser_as_the_substance_network_labels_every_part(db_url: str, store) -> None:
     """`substances.network.arch` on a backbone: a kind-"substance" row, each part classified as a whole."""

@@ -60,9 +60,11 @@ def frame_object(image: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.nda
     Exemplars are stored as exactly this square (`imaging.exemplar`, margin 0), so a network trained
     on framed renders sees objects at the scale it meets at inference; unframed, the training renders'
     objects (camera distance U(1.3, 1.75)) span about 60% of the frame against 100% in an exemplar.
-    An image without foreground is returned unchanged.
+    An image without foreground is returned unchanged. `ids` may stack label maps (H, W, C): the
+    first channel's foreground decides.
     """
-    box = square_box(np.asarray(ids) > 0)
+    ids = np.asarray(ids)
+    box = square_box((ids if ids.ndim == 2 else ids[..., 0]) > 0)
     if box is None:
         return image, ids
     x0, y0, side = box

@@ -35,6 +35,9 @@ class SubstanceTrainConfig:
     blur: float = 0.0  # maximum Gaussian sigma (source pixels) of a random blur before the crop; 0: off
     frame_object: bool = False  # crop renders to the square around the object, as exemplars are cropped
     class_balance: bool = True
+    # each part's pixels weigh (part area)^-part_balance in the loss (`substance_train.part_weights`);
+    # 0: the plain per-pixel loss
+    part_balance: float = 0.0
     seed: int = 0
     device: str = "cpu"
 
@@ -51,6 +54,8 @@ class SubstanceTrainConfig:
         data["crop_scale"] = list(self.crop_scale)
         if not self.uses_backbone:  # the segmentation network's rows (and hashes) stay as they were
             data.pop("arch")
+        if not self.part_balance:
+            data.pop("part_balance")
         return data
 
     @classmethod
@@ -64,8 +69,10 @@ class SubstanceTrainConfig:
 
 PRESETS: dict[str, SubstanceTrainConfig] = {
     "tiny": SubstanceTrainConfig(preset="tiny", size=32, width=8, epochs=2, batch_size=4, iters_per_epoch=3),
-    "cpu": SubstanceTrainConfig(preset="cpu", size=128, width=16, epochs=30, batch_size=16),
-    "gpu": SubstanceTrainConfig(preset="gpu", size=192, width=32, epochs=60, batch_size=64, lr=3e-3, device="cuda"),
+    # every part the same weight in the loss (D70); "tiny" stays per-pixel, a smoke test of the plain loss
+    "cpu": SubstanceTrainConfig(preset="cpu", size=128, width=16, epochs=30, batch_size=16, part_balance=1.0),
+    "gpu": SubstanceTrainConfig(preset="gpu", size=192, width=32, epochs=60, batch_size=64, lr=3e-3, device="cuda",
+                                part_balance=1.0),
     # the part recogniser: epochs of at most `iters_per_epoch` batches over the bootstrap round's parts
     "backbone": SubstanceTrainConfig(preset="backbone", arch="efficientnet-lite0", size=128, epochs=4,
                                      batch_size=32, iters_per_epoch=30, lr=1e-3),

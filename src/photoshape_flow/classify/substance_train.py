@@ -7,7 +7,8 @@ noise), random square crop covering `crop_scale` of the area, resized to `size`;
 colour jitter (brightness, contrast, saturation). Framing and blur are off in every preset: they
 measured worse on the medium demo (docs/decisions.md, D4).
 Loss: per-pixel cross-entropy with class weights ~ frequency^-1/2 (the white background dominates
-the pixels). AdamW with a cosine learning-rate
+the pixels); with ``part_balance`` p > 0 each part's pixels also weigh (part area)^-p, from the
+renders' part maps (`part_weights`). AdamW with a cosine learning-rate
 schedule computed from the global iteration, so a resumed run follows the same schedule.
 
 Resumability: `train_substance_net` calls `on_epoch(checkpoint, metrics)` after every epoch; the
@@ -46,11 +47,16 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class SubstanceData:
-    """Images (H, W, 3) uint8 and label maps (H, W) uint8 (SUBSTANCE_LABELS indices); sizes may vary."""
+    """Images (H, W, 3) uint8 and label maps (H, W) uint8 (SUBSTANCE_LABELS indices); sizes may vary.
+
+    `parts`: optional part-index maps (H, W) (0 = background), needed only when the loss balances
+    parts (`SubstanceTrainConfig.part_balance`).
+    """
 
     images: list[np.ndarray]
     labels: list[np.ndarray]
     keys: list[str] = field(default_factory=list)
+    parts: list[np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if len(self.images) != len(self.labels):
@@ -58,14 +64,25 @@ class SubstanceData:
         for image, label in zip(self.images, self.labels, strict=True):
             if image.shape[:2] != label.shape:
                 raise ValueError(f"image {image.shape} and label map {label.shape} differ in size")
+        if self.parts is not None and [p.shape for p in self.parts] != [lb.shape for lb in self.labels]:
+            raise ValueError("part maps and label maps differ in number or size")
 
     def __len__(self) -> int:
         return len(self.images)
 
     def framed(self) -> SubstanceData:
         """Each image and label map cropped to the square around its object (`frame_object`)."""
-        pairs = [frame_object(image, label) for image, label in zip(self.images, self.labels, strict=True)]
-        return SubstanceData([p[0] for p in pairs], [p[1] for p in pairs], list(self.keys))
+        maps = self.label_stacks()
+        pairs = [frame_object(image, stack) for image, stack in zip(self.images, maps, strict=True)]
+        labels = [p[1] if p[1].ndim == 2 else p[1][..., 0].astype(np.uint8) for p in pairs]
+        parts = None if self.parts is None else [p[1][..., 1] for p in pairs]
+        return SubstanceData([p[0] for p in pairs], labels, list(self.keys), parts)
+
+    def label_stacks(self) -> list[np.ndarray]:
+        """The label maps, each with its part map as a second channel (uint16) when parts are known."""
+        if self.parts is None:
+            return list(self.labels)
+        return [np.dstack([label, part]).astype(np.uint16) for label, part in zip(self.labels, self.parts, strict=True)]
 
 
 # -- augmentation -----------------------------------------------------------------------------------
@@ -84,14 +101,17 @@ def _resize(array: np.ndarray, size: int, nearest: bool) -> np.ndarray:
 def augment(
     image: np.ndarray, label: np.ndarray, config: SubstanceTrainConfig, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Random blur, square crop + resize, flip, colour jitter; float32 (H, W, 3) in [0, 1] and labels."""
+    """Random blur, square crop + resize, flip, colour jitter; float32 (H, W, 3) in [0, 1] and labels.
+
+    `label` is (H, W) or (H, W, C) (e.g. substances and parts stacked): every channel follows the crop.
+    """
     if config.blur > 0:
         import cv2
 
         sigma = float(rng.uniform(0.0, config.blur))
         if sigma > 0.05:
             image = cv2.GaussianBlur(image, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
-    h, w = label.shape
+    h, w = label.shape[:2]
     side_max = min(h, w)
     area = rng.uniform(*config.crop_scale)
     side = int(np.clip(round(math.sqrt(area) * side_max), 4, side_max))
@@ -110,6 +130,31 @@ def augment(
         grey = out.mean(axis=2, keepdims=True)
         out = grey + (out - grey) * rng.uniform(1 - j, 1 + j)
     return np.clip(out, 0.0, 1.0), np.ascontiguousarray(lab)
+
+
+_SLIVER_FRACTION_INVERSE = 1024
+
+
+def part_weights(parts: np.ndarray, power: float) -> np.ndarray:
+    """Per-pixel loss weights (H, W) float32 that let small parts count: each part's pixels weigh
+    (part area)^-power, scaled so that the foreground's mean weight is 1; background pixels weigh 1.
+
+    With power 1 every visible part carries the same total weight, whatever its size; 0 is the plain
+    per-pixel loss. Why: the per-pixel loss lets a chair's seat outvote its legs by 50:1, yet the
+    part-level vote reads each leg on its own, and small parts (legs, frames, handles) carry most of
+    the metal. Areas count as at least 1/1024 of the image (16 pixels at 128 px): a sliver a crop
+    leaves of a part at its edge is not a part the vote reads, and must not take the loss over.
+    """
+    parts = np.asarray(parts)
+    weights = np.ones(parts.shape, np.float32)
+    foreground = parts > 0
+    if power <= 0 or not foreground.any():
+        return weights
+    _, inverse, counts = np.unique(parts[foreground], return_inverse=True, return_counts=True)
+    areas = np.maximum(counts[inverse].astype(np.float64), parts.size / _SLIVER_FRACTION_INVERSE)
+    raw = areas ** -float(power)
+    weights[foreground] = (raw / raw.mean()).astype(np.float32)
+    return weights
 
 
 def _to_tensor(images: Sequence[np.ndarray]) -> torch.Tensor:
@@ -245,6 +290,10 @@ def train_substance_net(
         history = list(checkpoint.get("history", []))
         weights = np.asarray(checkpoint.get("class_weights", weights), np.float32)
     weight_t = torch.from_numpy(weights).to(device)
+    balance = float(config.part_balance)
+    if balance > 0 and train.parts is None:
+        raise ValueError("part_balance needs the training renders' part maps")
+    stacks = train.label_stacks() if balance > 0 else train.labels
     iters = config.iters_per_epoch or max(1, math.ceil(len(train) / config.batch_size))
     total_iters = iters * config.epochs
     epochs_run: list[int] = []
@@ -259,12 +308,19 @@ def train_substance_net(
         seen = 0
         for it in range(iters):
             idx = [int(order[(it * config.batch_size + k) % len(order)]) for k in range(config.batch_size)]
-            pairs = [augment(train.images[i], train.labels[i], config, rng) for i in idx]
+            pairs = [augment(train.images[i], stacks[i], config, rng) for i in idx]
             x = _to_tensor([p[0] for p in pairs]).to(device)
-            y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64)).to(device)
+            maps = np.stack([p[1] for p in pairs]).astype(np.int64)
+            y = torch.from_numpy(maps[..., 0] if balance > 0 else maps).to(device)
             for group in optimizer.param_groups:
                 group["lr"] = _lr_at(config, (epoch - 1) * iters + it, total_iters)
-            loss = F.cross_entropy(model(x), y, weight=weight_t)
+            if balance > 0:
+                pixel = torch.from_numpy(np.stack([part_weights(m[..., 1], balance) for m in maps])).to(device)
+                pixel = pixel * weight_t[y]  # the weighted mean F.cross_entropy takes, per pixel
+                per_pixel = F.cross_entropy(model(x), y, reduction="none")
+                loss = (per_pixel * pixel).sum() / pixel.sum()
+            else:
+                loss = F.cross_entropy(model(x), y, weight=weight_t)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

@@ -76,18 +76,20 @@ def load_bootstrap_data(session: sa.orm.Session, store: BlobStore) -> tuple[Any,
         .where(m.Rendering.kind == "bootstrap", m.Rendering.status == STATUS_OK, ~m.Rendering.exclude)
         .order_by(m.Rendering.key)
     ).all()
-    parts: dict[str, tuple[list[np.ndarray], list[np.ndarray], list[str]]] = {
-        "train": ([], [], []), "val": ([], [], [])
+    parts: dict[str, tuple[list[np.ndarray], list[np.ndarray], list[str], list[np.ndarray | None]]] = {
+        "train": ([], [], [], []), "val": ([], [], [], [])
     }
     signature = []
     for key, split, blobs, params_hash in rows:
-        beauty, labels = (blobs or {}).get("beauty"), (blobs or {}).get("substance_ids")
+        blobs = blobs or {}
+        beauty, labels = blobs.get("beauty"), blobs.get("substance_ids")
         if not beauty or not labels:
             log.warning("bootstrap rendering %s: no beauty or substance_ids blob; skipped", key)
             continue
         try:
             image = store.load_image(beauty)[..., :3]
             label = load_label_blob(store, labels)
+            part_map = load_label_blob(store, blobs["part_ids"]) if blobs.get("part_ids") else None
         except (OSError, ValueError) as exc:
             log.warning("bootstrap rendering %s: %s; skipped", key, exc)
             continue
@@ -95,10 +97,17 @@ def load_bootstrap_data(session: sa.orm.Session, store: BlobStore) -> tuple[Any,
         target[0].append(image)
         target[1].append(label.astype(np.uint8))
         target[2].append(key)
+        target[3].append(part_map)
         signature.append([key, params_hash])
-    train = SubstanceData(*parts["train"])
-    val = SubstanceData(*parts["val"])
+    train, val = (_substance_data(*parts[name]) for name in ("train", "val"))
     return train, val, stable_hash(signature)
+
+
+def _substance_data(images: list[np.ndarray], labels: list[np.ndarray], keys: list[str],
+                    part_maps: list[np.ndarray | None]) -> SubstanceData:
+    """SubstanceData with the part maps when every render has one (renders of older rounds may not)."""
+    known = [p for p in part_maps if p is not None]
+    return SubstanceData(images, labels, keys, known if len(known) == len(part_maps) else None)
 
 
 def load_label_blob(store: BlobStore, ref: str) -> np.ndarray:
