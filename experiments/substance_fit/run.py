@@ -1,0 +1,162 @@
+"""Where does a substance network lose parts: fitting its own renders, new shapes and lights, photo
+degradation, or the world?
+
+    PHOTOSHAPE_DATA_ROOT=/work/w-base python -m experiments.substance_fit.run \\
+        --groundtruth ../second-world/groundtruth.json --source second-world [--network ID]
+    python -m experiments.substance_fit.run --compare A.json B.json
+
+A substance network (the newest, or `--network`: the segmentation network or the part recogniser)
+reads every part of four sets with the stage's own vote (`classify.substance_parts`), each part
+against its true substance: the bootstrap renders it trained on, as it saw them (`train`); the
+bootstrap renders held out by shape and envmap (`val`); the same held-out renders degraded and
+framed like exemplars, their part maps misaligned (`val, photo-like`: `networks.validation_photos`);
+and, with `--groundtruth`, the world's exemplars through their CRF maps. The steps between the sets
+attribute the loss: fitting, generalisation, degradation, the world. Per set: accuracy, small parts
+(under `--small` of the map) and larger ones, recall per substance and the confusion matrix; reads
+per photo are kept so that `--compare` pairs two networks over the same photos (B minus A, 95%
+bootstrap interval over photos). Read-only; output `<data root>/experiments/substance_fit/network-ID.json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+
+from experiments.common import results_dir
+from experiments.small_parts.run import read, vote, world_photos
+from photoshape_flow.config import get_settings
+from photoshape_flow.db import models as m
+from photoshape_flow.db.session import session_scope
+from photoshape_flow.evaluation.bootstrap import difference_interval
+from photoshape_flow.hashing import item_seed
+from photoshape_flow.networks.classifiers import load_substance_network
+from photoshape_flow.networks.validation_photos import calibration_photo, exemplar_size
+from photoshape_flow.recognition.substances import load_label_blob
+from photoshape_flow.store import BlobStore
+from photoshape_flow.synth.spec import RenderSpec
+from photoshape_flow.vocab import SUBSTANCES
+
+Read = tuple[str, str, str, float]  # photo, true substance, read substance, the part's share of its map
+Photo = tuple[str, np.ndarray, np.ndarray, dict[int, str]]  # photo, RGB, part map, true substance per part
+
+
+def summarise(reads: list[Read], small: float) -> dict[str, Any]:
+    """Accuracy, small and larger parts, recall per true substance and the confusion (rows: truth)."""
+    confusion = np.zeros((len(SUBSTANCES), len(SUBSTANCES)), np.int64)
+    sizes: dict[str, list[bool]] = {"small": [], "larger": []}
+    for _, truth, pick, share in reads:
+        if truth in SUBSTANCES and pick in SUBSTANCES:
+            confusion[SUBSTANCES.index(truth), SUBSTANCES.index(pick)] += 1
+            sizes["small" if share < small else "larger"].append(truth == pick)
+    totals = confusion.sum(1)
+    return {
+        "parts": int(confusion.sum()),
+        "accuracy": float(np.trace(confusion) / max(1, confusion.sum())),
+        **{f"{k}_parts": len(v) for k, v in sizes.items()},
+        **{k: float(np.mean(v)) if v else None for k, v in sizes.items()},
+        "recall": {s: float(confusion[i, i] / totals[i]) for i, s in enumerate(SUBSTANCES) if totals[i]},
+        "confusion": confusion.tolist(),
+    }
+
+
+def by_photo(reads: list[Read]) -> dict[str, list[float]]:
+    """Photo -> hit (1) or miss (0) per part: what `--compare` pairs."""
+    out: dict[str, list[float]] = {}
+    for photo, truth, pick, _ in reads:
+        out.setdefault(photo, []).append(float(truth == pick))
+    return out
+
+
+def bootstrap_photos(session: Any, store: BlobStore, split: str, photo_like: bool, seed: int) -> Iterator[Photo]:
+    """The bootstrap renders of one split, as trained (`beauty`) or degraded like exemplars."""
+    substance = dict(session.execute(sa.select(m.Material.id, m.Material.substance)).all())
+    side = exemplar_size(session) or 320
+    rows = session.execute(sa.select(m.Rendering).where(
+        m.Rendering.kind == "bootstrap", m.Rendering.split == split, m.Rendering.status == "ok",
+        ~m.Rendering.exclude).order_by(m.Rendering.key)).scalars().all()
+    for row in rows:
+        truth = {i: substance[mid] for i, mid in RenderSpec.from_dict(row.params).material_by_index().items()
+                 if mid in substance}
+        ids = load_label_blob(store, row.blobs["part_ids"])
+        ids = ids[..., 0] if ids.ndim == 3 else ids
+        if not photo_like:
+            yield row.key, store.load_image(row.blobs["beauty"])[..., :3], ids.astype(np.int64), truth
+            continue
+        rng = np.random.default_rng(item_seed(seed, "substance-fit", row.kind, row.key))
+        rgb, labels, _ = calibration_photo(store.load_image(row.blobs["hdr"]), ids, side, side, rng)
+        yield row.key, rgb, labels.astype(np.int64), truth
+
+
+def read_parts(photos: Iterator[Photo], network: Any, size: int) -> list[Read]:
+    """Every visible part's vote, one forward pass per photo."""
+    out: list[Read] = []
+    for photo, rgb, labels, truth in photos:
+        probs = read(network, size, rgb, labels)
+        for index, substance in truth.items():
+            share = float((labels == index).sum() / max(1, (labels > 0).sum()))
+            if share > 0.0:
+                out.append((photo, substance, vote(labels, probs, index).substance, share))
+    return out
+
+
+def compare(first: Path, second: Path) -> None:
+    """B minus A per set, paired over the photos both read."""
+    a, b = (json.loads(path.read_text()) for path in (first, second))
+    for name in a["sets"]:
+        if name not in b["sets"]:
+            continue
+        reads_a, reads_b = a["sets"][name]["by_photo"], b["sets"][name]["by_photo"]
+        photos = set(reads_a) & set(reads_b)
+        diff = difference_interval({k: reads_b[k] for k in photos}, {k: reads_a[k] for k in photos})
+        print(f"{name:18s} A {a['sets'][name]['accuracy']:.3f}  B {b['sets'][name]['accuracy']:.3f}  "
+              f"B - A {diff.value:+.3f} ({diff.low:+.3f}, {diff.high:+.3f})")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--groundtruth", type=Path, default=None, help="an evaluation world (attribution only)")
+    parser.add_argument("--source", default=None)
+    parser.add_argument("--network", type=int, default=None, help="a substance classifier id (default: newest)")
+    parser.add_argument("--small", type=float, default=0.015, help="a part under this share of its map is small")
+    parser.add_argument("--compare", type=Path, nargs=2, default=None, metavar=("A", "B"))
+    args = parser.parse_args()
+    if args.compare:
+        compare(*args.compare)
+        return
+    settings = get_settings()
+    store = BlobStore(settings.blob_root)
+    with session_scope(settings.resolved_database_url) as session:  # read-only
+        query = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == "ok")
+        if args.network is not None:
+            query = query.where(m.Classifier.id == args.network)
+        row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
+        if row is None:
+            raise SystemExit("no trained substance network in this data root: run the substances stage first")
+        network, size = load_substance_network(row, store, "cpu"), int(row.config.get("size") or 128)
+        results: dict[str, Any] = {"network": row.id, "name": row.name, "small": args.small, "sets": {}}
+        sets = {"train": bootstrap_photos(session, store, "train", False, settings.seed),
+                "val": bootstrap_photos(session, store, "val", False, settings.seed),
+                "val, photo-like": bootstrap_photos(session, store, "val", True, settings.seed)}
+        if args.groundtruth is not None:
+            sets["world"] = world_photos(session, store, args.groundtruth, args.source)
+        for name, photos in sets.items():
+            reads = read_parts(photos, network, size)
+            results["sets"][name] = {**summarise(reads, args.small), "by_photo": by_photo(reads)}
+            cell = results["sets"][name]
+            recall = ", ".join(f"{k} {v:.2f}" for k, v in cell["recall"].items())
+            print(f"{name:18s} {cell['parts']:5d} parts  {cell['accuracy']:.3f}  small {cell['small'] or 0:.3f}  "
+                  f"larger {cell['larger'] or 0:.3f}  recall: {recall}", flush=True)
+        session.rollback()
+    out = results_dir(settings, "substance_fit")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"network-{results['network']}.json").write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

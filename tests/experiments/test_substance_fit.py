@@ -1,0 +1,27 @@
+"""`experiments.substance_fit`: the confusion, the size split and the per-photo reads it pairs."""
+
+from __future__ import annotations
+
+from experiments.substance_fit.run import by_photo, summarise
+
+from photoshape_flow.vocab import SUBSTANCES
+
+
+def test_summary_counts_truth_by_read_and_splits_small_parts() -> None:
+    reads = [("p1", "leather", "leather", 0.30), ("p1", "leather", "wood", 0.010),
+             ("p2", "metal", "plastic", 0.005), ("p2", "wood", "wood", 0.20)]
+    summary = summarise(reads, small=0.015)
+    assert summary["parts"] == 4 and summary["accuracy"] == 0.5
+    assert (summary["small_parts"], summary["small"]) == (2, 0.0)
+    assert (summary["larger_parts"], summary["larger"]) == (2, 1.0)
+    assert summary["recall"] == {"leather": 0.5, "wood": 1.0, "metal": 0.0}
+    confusion = summary["confusion"]
+    assert confusion[SUBSTANCES.index("leather")][SUBSTANCES.index("wood")] == 1
+    assert confusion[SUBSTANCES.index("metal")][SUBSTANCES.index("plastic")] == 1
+    assert sum(map(sum, confusion)) == 4
+
+
+def test_reads_outside_the_vocabulary_are_not_scored_and_photos_keep_their_parts() -> None:
+    reads = [("p1", "leather", "background", 0.3), ("p1", "fabric", "fabric", 0.3), ("p2", "wood", "metal", 0.3)]
+    assert summarise(reads, small=0.015)["parts"] == 2
+    assert by_photo(reads) == {"p1": [0.0, 1.0], "p2": [0.0]}
