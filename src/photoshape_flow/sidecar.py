@@ -12,11 +12,18 @@ ValueError (``Exceeds the limit (4300 digits)``) that escaped every ``except JSO
 a 1e400 or NaN reaches a float column as infinity or NaN. So integers are read through a digit
 limit, and every parsed number (JSON and TOML alike) must be finite and within `MAX_MAGNITUDE`;
 anything else is a DocumentError naming the number.
+
+Text must be storable: a lone surrogate (a JSON ``\\ud800`` or a .properties ``\\uD800`` escape) cannot
+be encoded as UTF-8 and a NUL cannot be stored in PostgreSQL text or JSONB, so either would reach the
+row's write as a bare UnicodeEncodeError or DataError, outside any item's guard.
+`unstorable_character` names such a character, and `check_values` refuses it anywhere in a
+sidecar, as it refuses TOML dates and times, which no JSON column can hold.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import sys
 import tomllib
 from pathlib import Path
@@ -26,6 +33,7 @@ MAX_BYTES = 1024 * 1024  # a sidecar is a few hundred bytes; a megabyte is alrea
 MAX_DEPTH = 32  # no sidecar or glTF nests deeper than a handful of levels
 MAX_DIGITS = 24  # a 64-bit integer has at most 20 digits; longer ones are no sidecar's or glTF's
 MAX_MAGNITUDE = 1e30  # beyond it no scale, count, offset or colour of a sidecar or glTF means anything
+_UNSTORABLE = re.compile("[\x00\ud800-\udfff]")  # NUL (PostgreSQL refuses it), lone surrogates (no UTF-8)
 
 
 class DocumentError(ValueError):
@@ -95,6 +103,39 @@ def check_numbers(value: Any, depth: int = 0) -> None:
     elif isinstance(value, list):
         for item in value:
             check_numbers(item, depth + 1)
+
+
+def unstorable_character(text: str) -> str | None:
+    """The first character of `text` that no database column can store, described; None when there is none."""
+    match = _UNSTORABLE.search(text)
+    if match is None:
+        return None
+    char = match.group()
+    what = "null" if char == "\x00" else "a lone surrogate"
+    return f"U+{ord(char):04X} ({what}, which cannot be stored)"
+
+
+def check_values(value: Any) -> None:
+    """DocumentError unless a parsed sidecar holds only storable text, numbers, booleans, lists and tables.
+
+    TOML's dates and times have no JSON form (a `params` table holding one failed at the row's write
+    with a TypeError); a NUL or lone surrogate in any string or key fails there too (see the module).
+    Recursion is bounded: documents reach here only after the depth scan.
+    """
+    if isinstance(value, str):
+        problem = unstorable_character(value)
+        if problem is not None:
+            raise DocumentError(f"text {value[:40]!r} contains {problem}")
+    elif isinstance(value, dict):
+        for key, item in value.items():
+            check_values(key)
+            check_values(item)
+    elif isinstance(value, list):
+        for item in value:
+            check_values(item)
+    elif value is not None and not isinstance(value, bool | int | float):
+        raise DocumentError(f"a {type(value).__name__} value {str(value)[:40]!r} (sidecars hold text, numbers, "
+                            "booleans, lists and tables)")
 
 
 def parse_text(text: str, kind: str, max_depth: int = MAX_DEPTH, finite_only: bool = True) -> Any:

@@ -7,6 +7,8 @@ input of the same collection, and runs the real CLI (`photoshape ingest <collect
 must: exit 0 (accepted) or 2 (rejected, never a crash), print no traceback and no control or bidi
 character, name the hostile file on a `rejected` line with the expected reason, and still ingest
 the good input after it. The count (76 kinds) is asserted below so it cannot shrink unnoticed.
+`POISON` adds sidecars and catalog properties whose values parse but cannot be stored or used, each
+run twice beside good inputs: one line, every good input in, nothing rewritten by the second run.
 """
 
 from __future__ import annotations
@@ -384,3 +386,90 @@ def test_a_rejected_catalog_gets_a_rejected_row(db_url: str, tmp_path: Path) -> 
     with session_scope(db_url) as session:
         row = session.execute(sa.select(m.Shape)).scalar_one()
         assert (row.source, row.source_id, row.status) == ("sweethome3d", "broken", "rejected") and row.error
+
+
+# --- poison sidecars and catalog properties: values that parse but cannot be stored or used ------------
+# Each hostile item sorts before its good neighbours, which must all go in; it costs exactly one
+# `rejected` line naming it, and a second run changes nothing (the writes are idempotent). Before the
+# fix the two catalog cases ended the whole batch (exit 1, "'utf-8' codec can't encode character
+# '\ud800'": the rejected piece's row was hashed and written outside the item guard), and the material
+# sidecars were stored with wrong types, or refused with a bare UnicodeEncodeError / TypeError and no row.
+S = "\\ud800"  # a .properties escape for a lone surrogate
+POISON: list[tuple[str, str, Callable[[Path], Path], str, str]] = [
+    # (id, collection, build(root) -> path given, the rejected line's item, expected reason fragment)
+    ("json-license-lone-surrogate", "materials", _sidecar('{"substance": "wood", "license": "\\ud800"}'),
+     "a_bad", "material.json: text '\\ud800' contains U+D800 (a lone surrogate, which cannot be stored)"),
+    ("json-params-nul", "materials", _sidecar('{"substance": "wood", "params": {"x": "a\\u0000b"}}'),
+     "a_bad", "contains U+0000 (null, which cannot be stored)"),
+    ("toml-params-datetime", "materials", _sidecar('substance = "wood"\n[params]\nwhen = 1979-05-27T07:32:00\n',
+                                                   "material.toml"), "a_bad", "material.toml: a datetime value"),
+    ("json-scale-true", "materials", _sidecar(_json(scale=True)), "a_bad", "scale must be a number, got True"),
+    ("json-scale-string", "materials", _sidecar(_json(scale="1e300")), "a_bad", "scale must be a number, got '1e300'"),
+    ("json-scale-denormal", "materials", _sidecar(_json(scale=5e-324)), "a_bad", "scale must be within 1e-06..1e+06"),
+    ("json-roughness-string", "materials", _sidecar(_json(params={"roughness": "0.5"})), "a_bad",
+     "params.roughness must be a number, got '0.5'"),
+    ("sh3f-rejected-piece-id-lone-surrogate", "shapes", _sh3f(chair_members("t/chair"), entries=[
+        CHAIR, {**CHAIR, "id": f"T#x{S}", "model": ""}]), "a_cat.sh3f:T#x\\ud800",
+     "catalog id contains U+D800 (a lone surrogate, which cannot be stored)"),
+    ("sh3f-unsupported-piece-name-lone-surrogate", "shapes", _sh3f(chair_members("t/chair"), entries=[
+        CHAIR, {**CHAIR, "id": "T#fbx", "name": f"x{S}", "model": "/t/chair/chair.fbx"}]), "a_cat.sh3f:T#fbx",
+     "name contains U+D800"),
+    ("sh3f-creator-lone-surrogate", "shapes", _sh3f(chair_members("t/chair"), entries=[
+        CHAIR, {**CHAIR, "id": "T#c2", "creator": S}]), "a_cat.sh3f:T#c2", "creator contains U+D800"),
+    ("sh3f-name-past-its-column", "shapes", _sh3f(chair_members("t/chair"), entries=[
+        CHAIR, {**CHAIR, "id": "T#c2", "name": "n" * 256}]), "a_cat.sh3f:T#c2", "name is 256 characters long"),
+]
+
+
+def _rows(url: str, collection: str) -> dict[str, dict[str, object]]:
+    """Every row of the collection's table by key, all columns (timestamps too: a rewrite shows)."""
+    model = TABLES[collection]
+    with session_scope(url) as session:
+        rows = [dict(r._mapping) for r in session.execute(sa.select(model.__table__))]
+    return {str(r["name"] if collection == "materials" else r["source_id"]): r for r in rows}
+
+
+@pytest.mark.parametrize(("collection", "build", "item", "expected"), [c[1:] for c in POISON],
+                         ids=[c[0] for c in POISON])
+def test_a_poison_sidecar_is_one_line_and_the_rest_of_the_batch_goes_in(
+    db_url: str, tmp_path: Path, collection: str, build: Callable[[Path], Path], item: str, expected: str,
+) -> None:
+    root = tmp_path / "in"
+    root.mkdir()
+    given = build(root)
+    if collection == "materials":
+        write_png(root / "0_good" / "albedo.png", np.full((4, 4, 3), 90, np.uint8))
+        (root / "0_good" / "material.json").write_text(_json(name="oak_sidecar"))
+        goods, extra = {"oak_sidecar", "wood_good"}, ["--no-previews"]
+    else:
+        goods, extra = {"a_cat/T#chair", "good"}, ["--no-isolate"]
+    good = _good(collection, tmp_path)
+    stored: dict[str, dict[str, object]] = {}
+    for attempt in ("first", "again"):
+        result = runner.invoke(app, ["ingest", collection, str(given), str(good), *extra])
+        output = result.output
+        assert "Traceback" not in output and result.exit_code == 2, (attempt, output)
+        assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+        assert not FORBIDDEN.search(output), (FORBIDDEN.search(output), output)
+        rejected = [" ".join(line.split()) for line in output.splitlines() if line.startswith("rejected")]
+        assert len(rejected) == 1 and item in rejected[0], (attempt, output)
+        assert "".join(expected.split()) in "".join(output.split()), (attempt, output)
+        rows = _rows(db_url, collection)
+        assert {k for k, r in rows.items() if r["status"] == "ok"} == goods, (attempt, output)  # the bad one not
+        assert all(not r.get("maps") and not r.get("mesh_blob") for r in rows.values() if r["status"] != "ok")
+        assert attempt == "first" or rows == stored, "a second run rewrote rows"  # idempotent
+        stored = rows
+
+
+def test_a_poison_sidecar_keeps_another_folders_material_of_its_name(db_url: str, tmp_path: Path) -> None:
+    """A bad folder `a_bad` must not wipe the good material `a_bad` another folder's sidecar named."""
+    root = tmp_path / "in"
+    write_png(root / "0_good" / "albedo.png", np.full((4, 4, 3), 90, np.uint8))
+    (root / "0_good" / "material.json").write_text(_json(name="a_bad"))
+    _sidecar(_json(scale="abc"))(root)
+    result = runner.invoke(app, ["ingest", "materials", str(root), "--no-previews"])
+    assert result.exit_code == 2 and "is kept" in " ".join(result.output.split()), result.output
+    with session_scope(db_url) as session:
+        row = session.execute(sa.select(m.Material)).scalar_one()
+        assert (row.name, row.status, row.enabled, set(row.maps)) == ("a_bad", "ok", True, {"albedo"})
+        assert row.source_path == str((root / "0_good").resolve())

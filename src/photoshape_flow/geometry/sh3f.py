@@ -5,6 +5,11 @@ A catalog is a zip holding `PluginFurnitureCatalog.properties` (Java properties,
 describe each piece, and the OBJ + MTL + textures of every model. `catalog_entries` lists the pieces;
 `model_files` finds the OBJ's MTL libraries and textures inside the zip (the dependency closure) so
 only those are extracted, through `SafeZip`.
+
+The properties are anyone's text, and `\\uXXXX` escapes can spell characters no database stores (a
+lone surrogate, a NUL): a piece whose id, name or stored fields hold one, or whose id or name is
+longer than its column, is listed as invalid with its reason (`piece_refusal`), and such a catalog
+header refuses the catalog.
 """
 
 from __future__ import annotations
@@ -16,12 +21,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from photoshape_flow.export.text import hidden_character
 from photoshape_flow.geometry.archive import SafeZip, UnsafeArchiveError, join_member, normalise_member
 from photoshape_flow.geometry.mtl import mtl_references
 from photoshape_flow.geometry.obj import obj_references
 from photoshape_flow.geometry.raw import BadShapeError
+from photoshape_flow.sidecar import unstorable_character
 
 CATALOG_FILE = "PluginFurnitureCatalog.properties"
+MAX_KEY_CHARS = 255  # shape.source_id (<catalog stem>/<piece id>) and shape.name are String(255)
+MAX_CATEGORY_CHARS = 64  # shape.category is String(64)
+STORED_FIELDS = ("name", "creator", "tags", "category", "model", "width", "depth", "height")  # what reaches a row
+HEADER_FIELDS = ("id", "name", "license", "provider")  # the catalog's, in every piece's row
 
 # Keywords in a piece's name or tags -> our category (first match wins; checked in this order).
 CATEGORY_KEYWORDS: tuple[tuple[str, tuple[str, ...]], ...] = (
@@ -90,7 +101,7 @@ def category_of(name: str, tags: str = "", catalog_category: str = "") -> str:
         for keyword in keywords:
             if keyword in words or re.search(rf"\b{keyword}s?\b", text):
                 return category
-    slug = re.sub(r"[^a-z0-9]+", "-", catalog_category.lower()).strip("-")
+    slug = re.sub(r"[^a-z0-9]+", "-", catalog_category.lower())[:MAX_CATEGORY_CHARS].strip("-")
     return slug or "misc"
 
 
@@ -116,7 +127,32 @@ class Catalog:
     license: str | None
     provider: str | None
     entries: list[CatalogEntry]
-    invalid: list[tuple[str, str]]  # (label, reason) of pieces that cannot be listed
+    invalid: list[tuple[str, str, str | None]]  # (label, reason, piece id; None when the id cannot key a row)
+
+
+def piece_refusal(piece_id: str, fields: dict[str, str | None], stem: str) -> tuple[str, bool] | None:
+    """Why a catalog piece cannot be stored, and whether its id can still key its rejected row; None if it can.
+
+    The id becomes part of `source_id` and the name `shape.name`: both are names, so a hidden
+    character refuses them (`hidden_character`), as do lengths past the columns. The other fields
+    are free text, escaped wherever shown, but a NUL or lone surrogate cannot be stored at all.
+    """
+    hidden = unstorable_character(piece_id) or hidden_character(piece_id)
+    if hidden is not None:
+        return f"catalog id contains {hidden}", False
+    if len(stem) + 1 + len(piece_id) > MAX_KEY_CHARS:
+        return f"catalog id is {len(piece_id)} characters long (limit {MAX_KEY_CHARS - len(stem) - 1})", False
+    name = fields.get("name") or ""
+    hidden = unstorable_character(name) or hidden_character(name)
+    if hidden is not None:
+        return f"name contains {hidden}", True
+    if len(name) > MAX_KEY_CHARS:
+        return f"name is {len(name)} characters long (limit {MAX_KEY_CHARS})", True
+    for key, value in fields.items():
+        problem = unstorable_character(value or "")
+        if problem is not None:
+            return f"{key} contains {problem}", True
+    return None
 
 
 def read_catalog(archive: SafeZip) -> Catalog:
@@ -124,21 +160,29 @@ def read_catalog(archive: SafeZip) -> Catalog:
     if archive.find(CATALOG_FILE) is None:
         raise BadShapeError(f"{archive.path.name}: no {CATALOG_FILE} (not a Sweet Home 3D furniture catalog)")
     props = parse_properties(archive.read(CATALOG_FILE).decode("latin-1"))
+    for key in HEADER_FIELDS:
+        problem = unstorable_character(props.get(key) or "")
+        if problem is not None:
+            raise BadShapeError(f"{archive.path.name}: catalog {key} contains {problem}")
     indices = sorted({int(k.split("#", 1)[1]) for k in props if re.match(r"^model#\d+$", k)})
     entries: list[CatalogEntry] = []
-    invalid: list[tuple[str, str]] = []
+    invalid: list[tuple[str, str, str | None]] = []
     for i in indices:
         get = lambda key, i=i: props.get(f"{key}#{i}")  # noqa: E731
         piece_id = get("id") or f"piece-{i}"
         name = get("name") or piece_id
         label = f"{archive.path.name}:{piece_id}"
+        refusal = piece_refusal(piece_id, {key: get(key) for key in STORED_FIELDS}, archive.path.stem)
+        if refusal is not None:
+            invalid.append((label, refusal[0], piece_id if refusal[1] else None))
+            continue
         model = (get("model") or "").strip()
         try:
             if not model:
                 raise BadShapeError("no model file")
             member = normalise_member(model.lstrip("/"))
         except BadShapeError as exc:
-            invalid.append((label, str(exc)))
+            invalid.append((label, str(exc), piece_id))
             continue
         rotation = None
         if raw_rotation := get("modelRotation"):
@@ -148,7 +192,8 @@ def read_catalog(archive: SafeZip) -> Catalog:
             except ValueError:
                 rotation = None
             if rotation is not None and not all(math.isfinite(v) and abs(v) <= 1.001 for v in rotation):
-                invalid.append((label, "modelRotation is no rotation matrix (non-finite or beyond ±1 values)"))
+                invalid.append((label, "modelRotation is no rotation matrix (non-finite or beyond ±1 values)",
+                                piece_id))
                 continue
         tags = get("tags") or ""
         catalog_category = get("category") or ""

@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import unquote
 
-from photoshape_flow.export.text import hidden_character
 from photoshape_flow.geometry.archive import ArchiveLimits, SafeZip, normalise_member
 from photoshape_flow.geometry.obj import referenced_files, resolve_inside
 from photoshape_flow.geometry.raw import BadShapeError
@@ -144,8 +143,9 @@ def _catalog_items(
     if not catalog.entries and not catalog.invalid:
         yield RejectedInput(str(path), "no furniture in the catalog (no model#N entries)", src, path.stem, path.stem)
         return
-    for label, reason in catalog.invalid:
-        yield RejectedInput(label, reason, src, f"{path.stem}/{label.split(':', 1)[-1]}")
+    for label, reason, piece_id in catalog.invalid:  # a piece whose id cannot key a row is a line only
+        yield (RejectedInput(label, reason) if piece_id is None
+               else RejectedInput(label, reason, src, f"{path.stem}/{piece_id}"))
     for entry in catalog.entries:
         if cats is not None and entry.category not in cats:
             continue
@@ -154,10 +154,6 @@ def _catalog_items(
         suffix = Path(entry.model).suffix.lower()
         label = f"{path.name}:{entry.id}"
         source_id = f"{path.stem}/{entry.id}"
-        hidden = hidden_character(entry.id)
-        if hidden is not None:  # an id is a key and is shown everywhere: refused, not stored
-            yield RejectedInput(label, f"catalog id contains {hidden}")
-            continue
         if suffix not in MODEL_SUFFIXES:
             yield RejectedInput(label, f"unsupported model format {suffix!r}", src, source_id, entry.name)
             continue

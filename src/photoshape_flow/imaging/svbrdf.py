@@ -23,11 +23,12 @@ import numpy as np
 from photoshape_flow.export.text import hidden_character
 from photoshape_flow.imaging.io import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, BadImageError, read_map
 from photoshape_flow.inputs import link_refusal
-from photoshape_flow.sidecar import DocumentError, parse_document
+from photoshape_flow.sidecar import DocumentError, check_values, parse_document
 from photoshape_flow.vocab import SUBSTANCES
 
 CHANNELS: tuple[str, ...] = ("albedo", "roughness", "metallic", "specular", "normal", "height")
 SIDECARS: tuple[str, ...] = ("material.json", "material.toml")
+SCALE_RANGE = (1e-6, 1e6)  # unit-cube units; beyond it UVs x 1/scale overflow float32 into NaN texture lookups
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".tga", ".bmp", ".webp"}
 
 _KEYWORDS: dict[str, str] = {}
@@ -96,7 +97,8 @@ def read_sidecar(folder: Path) -> tuple[dict[str, Any] | None, Path | None]:
     """The parsed sidecar of a folder (JSON preferred over TOML), or (None, None).
 
     Parsed within size and depth limits (`photoshape_flow.sidecar`): a hostile sidecar is one
-    BadMaterialError naming the file, never a RecursionError that would end the batch.
+    BadMaterialError naming the file, never a RecursionError that would end the batch; and it may
+    hold only storable values (`check_values`), so nothing it says fails later at the row's write.
     """
     for name in SIDECARS:
         path = folder / name
@@ -107,6 +109,7 @@ def read_sidecar(folder: Path) -> tuple[dict[str, Any] | None, Path | None]:
             continue
         try:
             data = parse_document(path)
+            check_values(data)
         except OSError as exc:
             raise BadMaterialError(f"{name}: unreadable ({exc.strerror or exc})") from exc
         except DocumentError as exc:
@@ -117,11 +120,15 @@ def read_sidecar(folder: Path) -> tuple[dict[str, Any] | None, Path | None]:
     return None, None
 
 
+def _number(value: Any, what: str) -> float:
+    """A sidecar number: JSON/TOML numbers only, since float() would also take true, "1e300" or "1_0"."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise BadMaterialError(f"{what} must be a number, got {value!r}")
+    return float(value)
+
+
 def _unit(value: Any, what: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise BadMaterialError(f"{what} must be a number, got {value!r}") from exc
+    number = _number(value, what)
     if not math.isfinite(number) or not 0.0 <= number <= 1.0:
         raise BadMaterialError(f"{what} must be within 0..1, got {value!r}")
     return number
@@ -237,12 +244,11 @@ def scan_material(folder: Path, *, substance: str | None = None, source: str | N
     kind = str(sidecar.get("kind", "svbrdf")).lower()
     if kind not in ("svbrdf", "analytic"):
         raise BadMaterialError(f"unknown kind {kind!r} (svbrdf or analytic)")
-    try:
-        scale = float(sidecar.get("scale", 0.25))
-    except (TypeError, ValueError) as exc:
-        raise BadMaterialError(f"scale must be a number, got {sidecar.get('scale')!r}") from exc
+    scale = _number(sidecar.get("scale", 0.25), "scale")
     if not math.isfinite(scale) or scale <= 0:
         raise BadMaterialError(f"scale must be a positive number, got {sidecar.get('scale')!r}")
+    if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
+        raise BadMaterialError(f"scale must be within {SCALE_RANGE[0]:g}..{SCALE_RANGE[1]:g}, got {scale:g}")
     convention = str(sidecar.get("normal", "gl")).lower()
     if convention not in ("gl", "dx"):
         raise BadMaterialError(f"normal must be \"gl\" or \"dx\", got {sidecar.get('normal')!r}")

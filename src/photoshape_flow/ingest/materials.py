@@ -98,14 +98,29 @@ def discover_material_folders(paths: Iterable[str | Path]) -> list[tuple[Path, s
 
 def _existing(url: str, name: str) -> dict[str, Any] | None:
     return existing_row(url, (m.Material.id, m.Material.sha256, m.Material.params_hash, m.Material.status,
-                              m.Material.error), m.Material.name == name)
+                              m.Material.error, m.Material.source_path), m.Material.name == name)
 
 
-_record_failure = FailureWriter(
+_write_failure = FailureWriter(
     m.Material, key=("name",), cleared={"maps": {}, "preview_blob": None, "enabled": False},
     defaults={"substance": "unknown", "meta": {}, "params": {}, "params_hash": ""},
 )
-"""Record a rejected/failed material row (no maps, disabled) and note it in the summary."""
+
+
+def _record_failure(
+    url: str, summary: IngestSummary, label: str, row: dict[str, Any], status: str, reason: str,
+    existing: dict[str, Any] | None,
+) -> None:
+    """Record a rejected/failed material row (no maps, disabled) and note it in the summary.
+
+    Never over another folder's good material: the key is a name, which a folder's own name or its
+    sidecar gives, so a poison sidecar in a folder called `oak` would otherwise wipe the maps of the
+    `oak` another folder holds. Then the reason is one line only, and the good row stays.
+    """
+    if existing is not None and existing["status"] == STATUS_OK and existing["source_path"] != row["source_path"]:
+        summary.reject(label, f"{reason} (material {row['name']!r} from {existing['source_path']} is kept)")
+        return
+    _write_failure(url, summary, label, row, status, reason, existing)
 
 
 def _store_map(store, channel: str, array: np.ndarray) -> str:  # type: ignore[no-untyped-def]

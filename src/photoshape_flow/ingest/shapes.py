@@ -225,6 +225,25 @@ def _ingest_item(
     summary.count_written(label, shape_id, existing, "shape")
 
 
+def _record_rejected(
+    url: str, summary: IngestSummary, item: RejectedInput, *, split: str | None, license: str | None,
+    attribution: str | None,
+) -> None:
+    """A refused input's line, and its `rejected` row when it has a key.
+
+    Run behind `guard_item` like any other item: a row the database refuses costs this line, never
+    the batch (a catalog piece's id may hold a ``\\uD800`` escape that no text column stores).
+    """
+    if not (item.source and item.source_id):
+        summary.reject(item.label, item.reason)
+        return
+    row = {"source": item.source, "source_id": item.source_id, "name": item.name,
+           "split": split or split_for(item.source, item.source_id), "source_path": item.label,
+           "license": license, "attribution": attribution, "sha256": None}
+    _record_failure(url, summary, item.label, row, STATUS_REJECTED, item.reason,
+                    _existing(url, item.source, item.source_id))
+
+
 def ingest_shapes(
     paths: Iterable[str | Path],
     *,
@@ -264,14 +283,8 @@ def ingest_shapes(
     try:
         for done, item in enumerate(items, start=1):
             if isinstance(item, RejectedInput):
-                if item.source and item.source_id:
-                    row = {"source": item.source, "source_id": item.source_id, "name": item.name,
-                           "split": split or split_for(item.source, item.source_id), "source_path": item.label,
-                           "license": license, "attribution": attribution, "sha256": None}
-                    existing = _existing(url, item.source, item.source_id)
-                    _record_failure(url, summary, item.label, row, STATUS_REJECTED, item.reason, existing)
-                else:
-                    summary.reject(item.label, item.reason)
+                guard_item(summary, item.label, lambda item=item: _record_rejected(
+                    url, summary, item, split=split, license=license, attribution=attribution))
             else:
                 key = (item.source, item.source_id)
                 if key in seen:
