@@ -21,6 +21,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from photoshape_flow.classify.color_prior import material_lab_matrix
+from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -105,7 +106,7 @@ def load_evidence(session: Session, store: BlobStore, settings: Settings, materi
         labs=material_lab_matrix(materials_order, mat_labs), sigma=sigma, network_id=newest,
         temperature=substance_temperature(settings, newest),
         network=load_substance_network(net_row, store, "cpu"),
-        net_size=int(net_row.config.get("size") or 128),
+        net_size=read_side_of(net_row.config) or 128,
     )
 
 

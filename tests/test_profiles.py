@@ -70,3 +70,13 @@ def test_profiles_and_the_cli_load_without_torch() -> None:
             "print('torch' in sys.modules, 'photoshape_flow.stages' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
+
+
+def test_medium_and_default_read_parts_at_the_fine_pitch_small_keeps_its_renders() -> None:
+    """D72: 256 px bootstrap renders, 128 px crops at their pitch, photos read at 256; small and tiny as they were."""
+    for name in ("medium", "default"):
+        substances = PROFILES[name].substances
+        assert substances.size == substances.network.read_side == 256, name
+        assert substances.network.size == 128 and substances.network.crop_scale == (0.1375, 0.25), name
+    for name in ("tiny", "small"):
+        assert PROFILES[name].substances.network.read_size == 0, name

@@ -25,6 +25,7 @@ import numpy as np
 import sqlalchemy as sa
 
 from photoshape_flow.classify.configs import AugmentConfig, get_config
+from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -83,7 +84,8 @@ def substance_arm(settings: Any, store: BlobStore, spec: str, cases: list, subst
         with session_scope(settings.resolved_database_url) as session:
             row = session.scalars(sa.select(m.Classifier).where(m.Classifier.kind == "substance")
                                   .order_by(m.Classifier.id)).first()
-            network, size, network_id = load_substance_network(row, store, "cpu"), int(row.config["size"]), row.id
+            network, network_id = load_substance_network(row, store, "cpu"), row.id
+            size = read_side_of(row.config) or 128
     else:
         network_id, network, _info = train_recogniser(settings, substance_config(spec, seed=settings.seed))
         size = 128

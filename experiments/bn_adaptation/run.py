@@ -26,6 +26,7 @@ import numpy as np
 import sqlalchemy as sa
 
 from experiments.common import results_dir
+from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
@@ -108,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         newest = max(n for n in session.execute(sa.select(m.PartSubstance.classifier_id).distinct()).scalars() if n)
         net_row = session.get(m.Classifier, newest)
         network = load_substance_network(net_row, store, "cpu")
-        net_size = int((net_row.config or {}).get("size") or 128)
+        net_size = read_side_of(net_row.config) or 128
     results: dict[str, Any] = {"classifier": row.id, "renders": args.renders, "conditions": {}}
     for condition, items in conditions.items():
         per_prior = {}

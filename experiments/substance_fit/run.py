@@ -30,6 +30,7 @@ import sqlalchemy as sa
 
 from experiments.common import results_dir
 from experiments.small_parts.run import read, vote, world_photos
+from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -138,7 +139,7 @@ def main() -> None:
         row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
         if row is None:
             raise SystemExit("no trained substance network in this data root: run the substances stage first")
-        network, size = load_substance_network(row, store, "cpu"), int(row.config.get("size") or 128)
+        network, size = load_substance_network(row, store, "cpu"), read_side_of(row.config) or 128
         results: dict[str, Any] = {"network": row.id, "name": row.name, "small": args.small, "sets": {}}
         sets = {"train": bootstrap_photos(session, store, "train", False, settings.seed),
                 "val": bootstrap_photos(session, store, "val", False, settings.seed),

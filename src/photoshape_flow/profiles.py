@@ -218,6 +218,11 @@ class Profile:
 
 _CPU_CLASSIFIER = CLASSIFIER_PRESETS["cpu"]
 _CPU_SUBSTANCES = SUBSTANCE_PRESETS["cpu"]
+# bootstrap renders at 256 px, the network trained on 128 px crops at that pitch and reading photos at
+# 256: parts at twice the detail for the same cost a step (D72). The crops span the pixels the cpu
+# preset's (0.55, 1.0) of a 128 px render spans, so only the pitch changes
+FINE_SUBSTANCES_SIZE = 256
+_FINE_SUBSTANCES = replace(_CPU_SUBSTANCES, read_size=FINE_SUBSTANCES_SIZE, crop_scale=(0.1375, 0.25))
 
 PROFILES: dict[str, Profile] = {
     "tiny": Profile(
@@ -247,14 +252,15 @@ PROFILES: dict[str, Profile] = {
         name="medium",
         coarse_alignment=CoarseAlignmentConfig(exemplar_topk=4, shape_topn=12),
         fine_alignment=FineAlignmentConfig(size=256),
-        substances=SubstancesConfig(bootstrap_count=1200, size=128, spp=32,
-                                    network=replace(_CPU_SUBSTANCES, epochs=60)),
+        substances=SubstancesConfig(bootstrap_count=1200, size=FINE_SUBSTANCES_SIZE, spp=32,
+                                    network=replace(_FINE_SUBSTANCES, epochs=60)),
         training_renders=TrainingRendersConfig(count=3000, size=128, spp=32),
         training=replace(_CPU_CLASSIFIER, epochs=12, max_steps_per_epoch=80, image_size=128),
         fit=FitConfig(size=128, spp=8, rotations=4, refine_max_rank=1),
         publish=PublishConfig(max_rank=1, views=8, size=256, spp=64),
     ),
-    "default": Profile(name="default"),
+    "default": Profile(name="default",
+                       substances=SubstancesConfig(size=FINE_SUBSTANCES_SIZE, network=_FINE_SUBSTANCES)),
     "paper": Profile(
         name="paper",
         coarse_alignment=CoarseAlignmentConfig(exemplar_topk=8, shape_topn=12),

@@ -169,3 +169,22 @@ def test_part_balanced_training_needs_part_maps_and_learns() -> None:
     assert metrics["pixel_accuracy"] > 0.8
     assert result.checkpoint["config"]["part_balance"] == 1.0
     assert "part_balance" not in replace(config, part_balance=0.0).to_dict()  # old rows keep their hashes
+
+
+def test_a_network_trained_on_crops_reads_whole_images_at_its_read_size() -> None:
+    """`read_size`: crops of `size` cut at the read scale train it; whole images are scored at that scale."""
+    from photoshape_flow.classify.substance_configs import read_side_of
+
+    torch.set_num_threads(2)
+    data = toy_substances(4, size=64)
+    config = get_config("tiny", epochs=1, iters_per_epoch=80, lr=1e-2, jitter=0.0, flip=False,
+                        read_size=64, crop_scale=(0.25, 0.25))
+    image, label = augment(data.images[0], data.labels[0], config, np.random.default_rng(0))
+    assert image.shape == (32, 32, 3) and label.shape == (32, 32)  # a quarter of the render, at its pitch
+    result = train_substance_net(data, None, config)
+    metrics = result.checkpoint["metrics"]
+    assert metrics["pixels"] == 4 * 64 * 64  # whole images at the read side, not resized to 32
+    assert metrics["pixel_accuracy"] > 0.8
+    assert read_side_of(result.checkpoint["config"]) == 64 and config.read_side == 64
+    assert read_side_of(replace(config, read_size=0).to_dict()) == 32
+    assert "read_size" not in replace(config, read_size=0).to_dict()  # old rows keep their hashes

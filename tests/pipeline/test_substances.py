@@ -172,6 +172,14 @@ def test_substances_stage_end_to_end_and_idempotent(
         (retrained,) = session.execute(sa.select(m.Classifier)).scalars()
     assert retrained.config["part_balance"] == 1.0 and retrained.checkpoint_blob != classifier.checkpoint_blob
 
+    # a network that reads photos at a finer pitch than it trains at reads the exemplars at that side
+    finer = run_substances(bootstrap_count=6, size=32, spp=2, train_config="tiny", train_overrides={"read_size": 48})
+    assert finer["network"]["epochs_run"] == [1, 2]
+    assert finer["part_substances"]["updated"] == 3 and finer["part_substances"]["read_size"] == 48
+    with session_scope(db_url) as session:
+        (network_row,) = session.execute(sa.select(m.Classifier)).scalars()
+    assert network_row.config["read_size"] == 48
+
 
 def test_the_part_recogniser_as_the_substance_network_labels_every_part(db_url: str, store) -> None:
     """`substances.network.arch` on a backbone: a kind-"substance" row, each part classified as a whole."""

@@ -8,6 +8,7 @@ The device is always replaced by the resolved `settings.device` when training st
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -38,12 +39,21 @@ class SubstanceTrainConfig:
     # each part's pixels weigh (part area)^-part_balance in the loss (`substance_train.part_weights`);
     # 0: the plain per-pixel loss
     part_balance: float = 0.0
+    # the side a whole image (a photo, a validation render) is read at; 0: `size`. Above `size` the
+    # network trains on `size` crops cut from renders at this scale (`crop_scale` is then a fraction of
+    # their area), so it learns parts at the finer pixel pitch it reads them at, for the same cost a step
+    read_size: int = 0
     seed: int = 0
     device: str = "cpu"
 
     @property
     def uses_backbone(self) -> bool:
         return self.arch != "unet"
+
+    @property
+    def read_side(self) -> int:
+        """The side whole images are resized to before the network reads them."""
+        return self.read_size or self.size
 
     @property
     def architecture(self) -> str:
@@ -56,6 +66,8 @@ class SubstanceTrainConfig:
             data.pop("arch")
         if not self.part_balance:
             data.pop("part_balance")
+        if not self.read_size:
+            data.pop("read_size")
         return data
 
     @classmethod
@@ -79,6 +91,13 @@ PRESETS: dict[str, SubstanceTrainConfig] = {
     "backbone-tiny": SubstanceTrainConfig(preset="backbone-tiny", arch="efficientnet-lite0", size=32, epochs=1,
                                           batch_size=4, iters_per_epoch=2, lr=1e-3),
 }
+
+
+def read_side_of(config: Mapping[str, Any] | None) -> int | None:
+    """The read side a stored network row's config names (`read_size`, else `size`); None if neither."""
+    config = config or {}
+    side = config.get("read_size") or config.get("size")
+    return int(side) if side else None
 
 
 def get_config(name: str, **overrides: Any) -> SubstanceTrainConfig:

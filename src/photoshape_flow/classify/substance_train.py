@@ -212,7 +212,7 @@ def metrics_from_confusion(conf: np.ndarray) -> dict[str, Any]:
 
 @torch.inference_mode()
 def evaluate(model: SubstanceNet, data: SubstanceData, size: int, batch_size: int = 16) -> dict[str, Any]:
-    """Metrics at the training resolution (images resized to size x size, labels nearest)."""
+    """Metrics with whole images resized to size x size (the read side), labels nearest."""
     device = next(model.parameters()).device
     was_training = model.training
     model.eval()
@@ -328,7 +328,7 @@ def train_substance_net(
             seen += len(idx)
         seconds = time.perf_counter() - started
         eval_data = val if val is not None and len(val) else train
-        metrics = evaluate(model, eval_data, config.size, batch_size=config.batch_size)
+        metrics = evaluate(model, eval_data, config.read_side, batch_size=config.batch_size)
         metrics.update(
             {
                 "split": "val" if eval_data is val else "train",

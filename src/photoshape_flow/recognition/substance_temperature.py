@@ -10,6 +10,7 @@ import numpy as np
 import sqlalchemy as sa
 
 from photoshape_flow.classify.substance_calibration import fit_temperature, nll, part_calibration_set
+from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.classify.substance_recognition import substance_map
 from photoshape_flow.config import Settings
 from photoshape_flow.db import models as m
@@ -68,7 +69,7 @@ def substance_temperature(settings: Settings, classifier_id: int, store: BlobSto
                                  *([] if bn_prior is None else [bn_prior])])
         if stored.part_temperature_key == cache_key:
             return stored.part_temperature
-        size = int((row.config or {}).get("size") or 128)
+        size = read_side_of(row.config) or 128
         checkpoint_ref = row.checkpoint_blob
         session.expunge(row)
     model = load_substance_network(row, store, settings.device)  # outside the session: a blob read

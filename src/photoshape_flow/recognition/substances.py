@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
-from photoshape_flow.classify.substance_configs import SubstanceTrainConfig, get_config
+from photoshape_flow.classify.substance_configs import SubstanceTrainConfig, get_config, read_side_of
 from photoshape_flow.classify.substance_parts import part_substances
 from photoshape_flow.classify.substance_recognition import recogniser_config, substance_map
 from photoshape_flow.classify.substance_train import (
@@ -225,7 +225,8 @@ def assign_part_substances(
     """
     url = settings.resolved_database_url
     store = store if store is not None else default_store(settings)
-    summary = {"pairs": 0, "updated": 0, "skipped": 0, "failed": 0, "parts": 0, "unobserved": 0, "errors": []}
+    summary = {"pairs": 0, "updated": 0, "skipped": 0, "failed": 0, "parts": 0, "unobserved": 0, "errors": [],
+               "read_size": size}
     with session_scope(url) as session:
         classifier = session.get(m.Classifier, classifier_id)
         checkpoint_ref = classifier.checkpoint_blob if classifier else None
@@ -361,4 +362,4 @@ def train_and_assign(settings: Settings, size: int, train_config: str | Substanc
 def _config_size(settings: Settings, classifier_id: int) -> int | None:
     with session_scope(settings.resolved_database_url) as session:
         row = session.get(m.Classifier, classifier_id)
-        return int(row.config.get("size")) if row is not None and row.config.get("size") else None
+        return read_side_of(row.config) if row is not None else None
