@@ -220,9 +220,13 @@ _CPU_CLASSIFIER = CLASSIFIER_PRESETS["cpu"]
 _CPU_SUBSTANCES = SUBSTANCE_PRESETS["cpu"]
 # bootstrap renders at 256 px, the network trained on 128 px crops at that pitch and reading photos at
 # 256: parts at twice the detail for the same cost a step (D72). The crops span the pixels the cpu
-# preset's (0.55, 1.0) of a 128 px render spans, so only the pitch changes
+# preset's crops of a render at its own size span (area shrinks by the square of the scale), so only
+# the pitch changes: (0.55, 1.0) -> (0.1375, 0.25)
 FINE_SUBSTANCES_SIZE = 256
-_FINE_SUBSTANCES = replace(_CPU_SUBSTANCES, read_size=FINE_SUBSTANCES_SIZE, crop_scale=(0.1375, 0.25))
+_FINE_SUBSTANCES = replace(
+    _CPU_SUBSTANCES, read_size=FINE_SUBSTANCES_SIZE,
+    crop_scale=tuple(a * (_CPU_SUBSTANCES.size / FINE_SUBSTANCES_SIZE) ** 2 for a in _CPU_SUBSTANCES.crop_scale),
+)
 
 PROFILES: dict[str, Profile] = {
     "tiny": Profile(

@@ -9,7 +9,7 @@ import pytest
 import torch
 from tests.classify.regiondata import SUBSTANCE_COLOURS, toy_substances
 
-from photoshape_flow.classify.substance_configs import get_config
+from photoshape_flow.classify.substance_configs import get_config, read_side_of
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.classify.substance_train import (
     SubstanceData,
@@ -173,8 +173,6 @@ def test_part_balanced_training_needs_part_maps_and_learns() -> None:
 
 def test_a_network_trained_on_crops_reads_whole_images_at_its_read_size() -> None:
     """`read_size`: crops of `size` cut at the read scale train it; whole images are scored at that scale."""
-    from photoshape_flow.classify.substance_configs import read_side_of
-
     torch.set_num_threads(2)
     data = toy_substances(4, size=64)
     config = get_config("tiny", epochs=1, iters_per_epoch=80, lr=1e-2, jitter=0.0, flip=False,
