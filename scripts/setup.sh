@@ -45,9 +45,11 @@ if command -v dpkg-query >/dev/null 2>&1; then
         if [ "$(id -u)" = 0 ]; then
             say "apt-get install $need_required $need_optional"
             apt-get update -qq
-            DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $need_required >/dev/null
+            # another apt (a user's, unattended-upgrades) may hold dpkg's lock: wait for it, not fail
+            apt=(apt-get -o DPkg::Lock::Timeout=600)
+            DEBIAN_FRONTEND=noninteractive "${apt[@]}" install -y -qq $need_required >/dev/null
             if [ -n "$need_optional" ]; then
-                DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $need_optional >/dev/null \
+                DEBIAN_FRONTEND=noninteractive "${apt[@]}" install -y -qq $need_optional >/dev/null \
                     || say "warning: could not install optional packages: $need_optional"
             fi
         else
@@ -65,6 +67,10 @@ want=$( (cat pyproject.toml constraints.txt scripts/setup.sh; echo "$SETUP_MODE"
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
     say "python environment up to date ($VENV)"
 else
+    # A venv left half-made by an interrupted set-up has a python but no pip: make it again.
+    if [ -x "$VENV/bin/python" ] && ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
+        say "$VENV has no pip (an interrupted set-up?): creating it again"; rm -rf "$VENV"
+    fi
     [ -x "$VENV/bin/python" ] || { say "creating $VENV"; "$PYTHON" -m venv "$VENV"; }
     pip=("$VENV/bin/python" -m pip --disable-pip-version-check -q)
     if ! "$VENV/bin/python" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$TORCH_VERSION')" 2>/dev/null; then

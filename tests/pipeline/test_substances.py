@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import sqlalchemy as sa
 from tests.synth.collection import seed_collection
 
+from photoshape_flow.classify.substance_configs import get_config
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -180,11 +183,18 @@ def test_substances_stage_end_to_end_and_idempotent(
         (network_row,) = session.execute(sa.select(m.Classifier)).scalars()
     assert network_row.config["read_size"] == 48
 
+    # the config's own seed (the profile's `--set substances.network.seed`) is a second training on
+    # the same renders, not overridden by the run's seed
+    reseeded = run_substances(bootstrap_count=6, size=32, spp=2, train_config=replace(get_config("tiny"), seed=3),
+                              train_overrides={"read_size": 48})
+    assert reseeded["bootstrap"]["rendered"] == 0 and reseeded["network"]["epochs_run"] == [1, 2]
+    with session_scope(db_url) as session:
+        (reseeded_row,) = session.execute(sa.select(m.Classifier)).scalars()
+    assert reseeded_row.config["seed"] == 3 and reseeded_row.checkpoint_blob != network_row.checkpoint_blob
+
 
 def test_the_part_recogniser_as_the_substance_network_labels_every_part(db_url: str, store) -> None:
     """`substances.network.arch` on a backbone: a kind-"substance" row, each part classified as a whole."""
-    from photoshape_flow.classify.substance_configs import get_config
-
     with session_scope(db_url) as session:
         col = seed_collection(session, store, exemplar_size=EXEMPLAR)
     hidden_part = _add_alignments(db_url, store, col)

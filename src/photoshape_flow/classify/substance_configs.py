@@ -43,6 +43,8 @@ class SubstanceTrainConfig:
     # network trains on `size` crops cut from renders at this scale (`crop_scale` is then a fraction of
     # their area), so it learns parts at the finer pixel pitch it reads them at, for the same cost a step
     read_size: int = 0
+    # 0: the run's seed (`PHOTOSHAPE_SEED`), as every other draw of a run; another value fixes this
+    # network's own, so a second training on the same bootstrap renders is one `--set`
     seed: int = 0
     device: str = "cpu"
 

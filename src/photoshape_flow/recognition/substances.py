@@ -127,7 +127,7 @@ def train_or_resume(
     store = store if store is not None else default_store(settings)
     device = resolve_device(settings.device)
     base = train_config if isinstance(train_config, SubstanceTrainConfig) else get_config(train_config)
-    config = replace(base, device=device, seed=settings.seed, **overrides)
+    config = replace(base, **{"device": device, "seed": base.seed or settings.seed, **overrides})
     if config.uses_backbone:
         return train_recogniser(settings, config, progress=progress, store=store)
     name = f"substance-{config.preset}"
