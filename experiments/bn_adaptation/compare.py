@@ -8,7 +8,9 @@ network's input (here: its BatchNorm prior) needs the same method compared acros
 same rows (a copy of the database before the change, the database after it; one blob store). For
 each method key in both, and each of top-1, top-5 and substance accuracy: A, B and B - A with a
 95% bootstrap interval that resamples the same exemplars for both arms
-(`evaluation.bootstrap.difference_interval`). Read-only.
+(`evaluation.bootstrap.difference_interval`). A method ranked by several classifiers in one arm
+(a copy whose classifier was trained again keeps the old one's rows) is read at its newest
+classifier: `fit` of A's newest pairs with `fit` of B's. Read-only.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from photoshape_flow.config import get_settings
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import difference_interval, mean_interval
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
+from photoshape_flow.method_keys import classifier_id_of, method_of
 from photoshape_flow.scoring.evaluate import inference_observations
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
@@ -32,8 +35,15 @@ def observations(url: str, groundtruth: Path, source: str, store: BlobStore) -> 
     gt = read_groundtruth_file(groundtruth)
     with session_scope(url) as session:
         truths = match_groundtruth(session, gt, source).truths
-        return {k: dict(v) for k, v in inference_observations(session, store, truths, rerender_max_pairs=0,
-                                                                 relight_max_pairs=0).items()}
+        return newest(inference_observations(session, store, truths, rerender_max_pairs=0, relight_max_pairs=0))
+
+
+def newest(by_key: dict) -> dict:
+    """Each method's observations at its newest classifier, keyed by the method's name."""
+    out: dict = {}
+    for key in sorted(by_key, key=lambda k: classifier_id_of(k) or -1):
+        out[method_of(key)] = dict(by_key[key])
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
