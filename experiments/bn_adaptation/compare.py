@@ -10,7 +10,9 @@ each method key in both, and each of top-1, top-5 and substance accuracy: A, B a
 95% bootstrap interval that resamples the same exemplars for both arms
 (`evaluation.bootstrap.difference_interval`). A method ranked by several classifiers in one arm
 (a copy whose classifier was trained again keeps the old one's rows) is read at its newest
-classifier: `fit` of A's newest pairs with `fit` of B's. Read-only.
+classifier: `fit` of A's newest pairs with `fit` of B's. The substances stage's own part labels
+(`substances`) are paired too, so two arms that differ only in that stage compare before any
+network downstream of it is trained. Read-only.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import difference_interval, mean_interval
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.method_keys import classifier_id_of, method_of
-from photoshape_flow.scoring.evaluate import inference_observations
+from photoshape_flow.scoring.evaluate import inference_observations, part_substance_hits
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 
@@ -35,7 +37,9 @@ def observations(url: str, groundtruth: Path, source: str, store: BlobStore) -> 
     gt = read_groundtruth_file(groundtruth)
     with session_scope(url) as session:
         truths = match_groundtruth(session, gt, source).truths
-        return newest(inference_observations(session, store, truths, rerender_max_pairs=0, relight_max_pairs=0))
+        stage = {"substances": {"substance_accuracy": dict(part_substance_hits(session, store, truths))}}
+        return {**newest(inference_observations(session, store, truths, rerender_max_pairs=0, relight_max_pairs=0)),
+                **{k: v for k, v in stage.items() if v["substance_accuracy"]}}
 
 
 def newest(by_key: dict) -> dict:

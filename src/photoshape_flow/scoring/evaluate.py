@@ -78,6 +78,12 @@ def estimated(stage: str, method: str, metric: str, obs: Observations) -> Metric
 # --- stages ----------------------------------------------------------------------------------------
 
 def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, TruthEntry]) -> list[Metric]:
+    return [estimated("substances", "substance-network", "part_substance_accuracy",
+                      part_substance_hits(session, store, truths))]
+
+
+def part_substance_hits(session: Session, store: BlobStore, truths: dict[int, TruthEntry]) -> dict[int, list[float]]:
+    """Per exemplar, 1 or 0 for each observed part the substances stage labelled, against its truth."""
     correct: dict[int, list[float]] = defaultdict(list)
     rows = session.execute(
         sa.select(m.PartSubstance, m.Pair, m.Part, m.Alignment, m.Exemplar)
@@ -96,7 +102,7 @@ def evaluate_substances(session: Session, store: BlobStore, truths: dict[int, Tr
         if truth is None:
             continue
         correct[exemplar.id].append(float(ps.substance == truth[1]))
-    return [estimated("substances", "substance-network", "part_substance_accuracy", correct)]
+    return correct
 
 
 def evaluate_training(session: Session) -> list[Metric]:
