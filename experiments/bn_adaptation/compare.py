@@ -37,9 +37,11 @@ def observations(url: str, groundtruth: Path, source: str, store: BlobStore) -> 
     gt = read_groundtruth_file(groundtruth)
     with session_scope(url) as session:
         truths = match_groundtruth(session, gt, source).truths
-        stage = {"substances": {"substance_accuracy": dict(part_substance_hits(session, store, truths))}}
-        return {**newest(inference_observations(session, store, truths, rerender_max_pairs=0, relight_max_pairs=0)),
-                **{k: v for k, v in stage.items() if v["substance_accuracy"]}}
+        scores = newest(inference_observations(session, store, truths, rerender_max_pairs=0, relight_max_pairs=0))
+        hits = dict(part_substance_hits(session, store, truths))
+        if hits:
+            scores["substances"] = {"substance_accuracy": hits}
+        return scores
 
 
 def newest(by_key: dict) -> dict:
