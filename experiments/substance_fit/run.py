@@ -4,6 +4,7 @@ degradation, or the world?
     PHOTOSHAPE_DATA_ROOT=/work/w-base python -m experiments.substance_fit.run \\
         --groundtruth ../second-world/groundtruth.json --source second-world [--network ID]
     python -m experiments.substance_fit.run --compare A.json B.json
+    ... run --with /work/other-root [--scales 1.0 0.8]   # an ensemble, several read scales
 
 A substance network (the newest, or `--network`: the segmentation network or the part recogniser)
 reads every part of four sets with the stage's own vote (`classify.substance_parts`), each part
@@ -14,7 +15,11 @@ and, with `--groundtruth`, the world's exemplars through their CRF maps. The ste
 attribute the loss: fitting, generalisation, degradation, the world. Per set: accuracy, small parts
 (under `--small` of the map) and larger ones, recall per substance and the confusion matrix; reads
 per photo are kept so that `--compare` pairs two networks over the same photos (B minus A, 95%
-bootstrap interval over photos). Read-only; output `<data root>/experiments/substance_fit/network-ID.json`.
+bootstrap interval over photos). `--with ROOT` (repeatable) adds the newest trained substance network
+of another data root trained on the same renders (another seed, say): the members' probabilities are
+averaged before the vote, an ensemble. `--scales` reads each photo at these multiples of the read
+size and averages them too. Read-only; output `<data root>/experiments/substance_fit/network-ID.json`
+(ID: the members' ids joined by `+`, then `@` and the scales when not 1).
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ import sqlalchemy as sa
 from experiments.common import results_dir
 from experiments.small_parts.run import read, vote, world_photos
 from photoshape_flow.classify.substance_configs import read_side_of
-from photoshape_flow.config import get_settings
+from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import difference_interval
@@ -94,11 +99,21 @@ def bootstrap_photos(session: Any, store: BlobStore, split: str, photo_like: boo
         yield row.key, rgb, labels.astype(np.int64), truth
 
 
-def read_parts(photos: Iterator[Photo], network: Any, size: int) -> list[Read]:
-    """Every visible part's vote, one forward pass per photo."""
+Member = tuple[Any, int]  # a substance network and its read size
+
+
+def read_members(members: list[Member], scales: list[float], rgb: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """The mean of every member's probabilities at every scale of its read size, at the part map's size."""
+    reads = [read(network, max(32, int(round(size * scale / 32)) * 32), rgb, labels)
+             for network, size in members for scale in scales]
+    return np.mean(reads, axis=0)
+
+
+def read_parts(photos: Iterator[Photo], members: list[Member], scales: list[float]) -> list[Read]:
+    """Every visible part's vote, one forward pass per photo, member and scale."""
     out: list[Read] = []
     for photo, rgb, labels, truth in photos:
-        probs = read(network, size, rgb, labels)
+        probs = read_members(members, scales, rgb, labels)
         for index, substance in truth.items():
             share = float((labels == index).sum() / max(1, (labels > 0).sum()))
             if share > 0.0:
@@ -119,6 +134,26 @@ def compare(first: Path, second: Path) -> None:
               f"B - A {diff.value:+.3f} ({diff.low:+.3f}, {diff.high:+.3f})")
 
 
+def newest_network(session: Any, network: int | None = None) -> Any:
+    """The newest trained substance network's row (or `network`'s)."""
+    query = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == "ok")
+    if network is not None:
+        query = query.where(m.Classifier.id == network)
+    row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
+    if row is None:
+        raise SystemExit("no trained substance network in this data root: run the substances stage first")
+    return row
+
+
+def other_member(root: Path) -> tuple[Member, str]:
+    """The newest trained substance network of another data root (its database and blobs), and its id."""
+    settings = Settings(data_root=root, database_url=None, blob_root=None)
+    with session_scope(settings.resolved_database_url) as session:
+        row = newest_network(session)
+        network = load_substance_network(row, BlobStore(settings.blob_root), "cpu")
+        return (network, read_side_of(row.config) or 128), f"{root.name}:{row.id}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--groundtruth", type=Path, default=None, help="an evaluation world (attribution only)")
@@ -126,28 +161,33 @@ def main() -> None:
     parser.add_argument("--network", type=int, default=None, help="a substance classifier id (default: newest)")
     parser.add_argument("--small", type=float, default=0.015, help="a part under this share of its map is small")
     parser.add_argument("--compare", type=Path, nargs=2, default=None, metavar=("A", "B"))
+    parser.add_argument("--with", dest="others", type=Path, action="append", default=[],
+                        help="another data root whose newest substance network joins the ensemble")
+    parser.add_argument("--scales", type=float, nargs="+", default=[1.0],
+                        help="read at these multiples of the read size")
     args = parser.parse_args()
     if args.compare:
         compare(*args.compare)
         return
     settings = get_settings()
     store = BlobStore(settings.blob_root)
+    others = [other_member(root) for root in args.others]
     with session_scope(settings.resolved_database_url) as session:  # read-only
-        query = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == "ok")
-        if args.network is not None:
-            query = query.where(m.Classifier.id == args.network)
-        row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
-        if row is None:
-            raise SystemExit("no trained substance network in this data root: run the substances stage first")
-        network, size = load_substance_network(row, store, "cpu"), read_side_of(row.config) or 128
-        results: dict[str, Any] = {"network": row.id, "name": row.name, "small": args.small, "sets": {}}
+        row = newest_network(session, args.network)
+        members = [(load_substance_network(row, store, "cpu"), read_side_of(row.config) or 128)]
+        members += [member for member, _ in others]
+        label = "+".join([str(row.id), *(name for _, name in others)])
+        if args.scales != [1.0]:
+            label += "@" + ",".join(f"{s:g}" for s in args.scales)
+        results: dict[str, Any] = {"network": label, "name": row.name, "small": args.small,
+                                   "scales": args.scales, "sets": {}}
         sets = {"train": bootstrap_photos(session, store, "train", False, settings.seed),
                 "val": bootstrap_photos(session, store, "val", False, settings.seed),
                 "val, photo-like": bootstrap_photos(session, store, "val", True, settings.seed)}
         if args.groundtruth is not None:
             sets["world"] = world_photos(session, store, args.groundtruth, args.source)
         for name, photos in sets.items():
-            reads = read_parts(photos, network, size)
+            reads = read_parts(photos, members, args.scales)
             results["sets"][name] = {**summarise(reads, args.small), "by_photo": by_photo(reads)}
             cell = results["sets"][name]
             recall = ", ".join(f"{k} {v:.2f}" for k, v in cell["recall"].items())

@@ -18,8 +18,10 @@ def _entries(tmp_path: Path) -> tuple[list[GalleryEntry], list[GalleryMaterial]]
     img.mkdir()
     export = tmp_path / "export"
     (export / "mitsuba" / "meshes").mkdir(parents=True)
+    (export / "mitsuba" / "textures").mkdir()
     (export / "mitsuba" / "scene.xml").write_text("<scene/>")
     (export / "mitsuba" / "meshes" / "part_0001.ply").write_bytes(b"ply\n")
+    write_png(export / "mitsuba" / "textures" / "oak.png", rng.integers(0, 255, (16, 16, 3), np.uint8))
     (export / "photoshape.glb").write_bytes(b"glTF")
     (export / "assignment.json").write_text("{}")
     entries = []
@@ -52,7 +54,12 @@ def test_gallery_files_and_escaping(tmp_path):
     page = (tmp_path / "site" / "pairs" / "2-classifier-1.html").read_text()
     assert "90.0%" in page and "built-in" in page and "CC-BY-4.0" in page
     with zipfile.ZipFile(tmp_path / "site" / "downloads" / "2-classifier-1" / "xml.zip") as zf:
-        assert sorted(zf.namelist()) == ["xml/meshes/part_0001.ply", "xml/scene.xml"]
+        assert sorted(zf.namelist()) == ["xml/meshes/part_0001.ply", "xml/scene.xml", "xml/textures/oak.png"]
+        # text deflated; an image its codec already compressed stored as it is, byte for byte
+        kinds = {info.filename: info.compress_type for info in zf.infolist()}
+        assert kinds["xml/scene.xml"] == zipfile.ZIP_DEFLATED and kinds["xml/textures/oak.png"] == zipfile.ZIP_STORED
+        texture = tmp_path / "export" / "mitsuba" / "textures" / "oak.png"
+        assert zf.read("xml/textures/oak.png") == texture.read_bytes()
 
 
 @pytest.mark.browser

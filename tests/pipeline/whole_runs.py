@@ -25,9 +25,11 @@ def run_env(data_root: Path, url: str | None, **extra: str) -> dict[str, str]:
     return env
 
 
-def run_all(data_root: Path, url: str | None, **extra: str) -> subprocess.CompletedProcess:
-    """`photoshape db upgrade`, then `photoshape run all --profile tiny`, as a user would type them."""
-    subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=run_env(data_root, url), check=True, capture_output=True)
+def run_all(data_root: Path, url: str | None, upgrade: bool = True, **extra: str) -> subprocess.CompletedProcess:
+    """`photoshape db upgrade` (a new data root's first command; `upgrade=False`: a resumed run, already
+    migrated), then `photoshape run all --profile tiny`, as a user would type them."""
+    if upgrade:
+        subprocess.run([PHOTOSHAPE, "db", "upgrade"], env=run_env(data_root, url), check=True, capture_output=True)
     return subprocess.run([PHOTOSHAPE, "run", "all", "--profile", "tiny"], env=run_env(data_root, url, **extra),
                           capture_output=True, text=True, timeout=1200)
 

@@ -211,6 +211,11 @@ def _model_script(root: Path, glb: Path | None) -> str | None:
     return rel
 
 
+# members stored as they are: their own codecs already compressed them (deflate gains under 10%
+# on EXR, nothing on PNG, JPEG or GLB textures, and took most of a gallery rewrite's time)
+STORED_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".exr", ".glb", ".ktx2", ".webp"})
+
+
 def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
     """Copy a single-file download, or zip what a multi-file format needs (`bundle.format_files`);
     returns the site path."""
@@ -226,7 +231,8 @@ def _download(root: Path, slug: str, fmt: str, source: Path) -> str | None:
     archive = folder / f"{fmt}.zip"
     with zipfile.ZipFile(archive, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for path, name in files:
-            zf.write(path, name)
+            stored = Path(path).suffix.lower() in STORED_SUFFIXES
+            zf.write(path, name, compress_type=zipfile.ZIP_STORED if stored else zipfile.ZIP_DEFLATED)
     return f"downloads/{slug}/{archive.name}"
 
 
