@@ -165,6 +165,7 @@ def main() -> None:
                         help="another data root whose newest substance network joins the ensemble")
     parser.add_argument("--scales", type=float, nargs="+", default=[1.0],
                         help="read at these multiples of the read size")
+    parser.add_argument("--skip-train", action="store_true", help="leave out the training renders (the slowest set)")
     args = parser.parse_args()
     if args.compare:
         compare(*args.compare)
@@ -184,6 +185,8 @@ def main() -> None:
         sets = {"train": bootstrap_photos(session, store, "train", False, settings.seed),
                 "val": bootstrap_photos(session, store, "val", False, settings.seed),
                 "val, photo-like": bootstrap_photos(session, store, "val", True, settings.seed)}
+        if args.skip_train:
+            del sets["train"]
         if args.groundtruth is not None:
             sets["world"] = world_photos(session, store, args.groundtruth, args.source)
         for name, photos in sets.items():
