@@ -33,7 +33,7 @@ from photoshape_flow.recognition.substance_temperature import substance_temperat
 from photoshape_flow.scoring.evaluate import pair_truths
 from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import SUBSTANCE_LABELS
+from photoshape_flow.vocab import STATUS_OK, SUBSTANCE_LABELS
 
 # the columns of `region_hits`' rows
 HIT_COLUMNS = ("case", "material", "top1", "top5", "substance_top", "substance_head", "substance_mass")
@@ -91,6 +91,17 @@ class Evidence:
     temperature: float | None  # its part-level temperature
     network: Any  # the substance network itself (segmentation net, or the part recogniser's MaterialClassifier)
     net_size: int  # its input size
+
+
+def newest_substance_network(session: Session, network: int | None = None) -> Any:
+    """The newest trained (status ok) substance network's row, or `network`'s; exits naming the gap."""
+    query = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == STATUS_OK)
+    if network is not None:
+        query = query.where(m.Classifier.id == network)
+    row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
+    if row is None:
+        raise SystemExit("no trained substance network in this data root: run the substances stage first")
+    return row
 
 
 def load_evidence(session: Session, store: BlobStore, settings: Settings, materials_order: list[int]) -> Evidence:

@@ -16,16 +16,13 @@ from __future__ import annotations
 
 import argparse
 
-import sqlalchemy as sa
-
+from experiments.common import newest_substance_network
 from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.config import get_settings
-from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.networks.classifiers import load_substance_network
 from photoshape_flow.recognition.substances import assign_part_substances
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import STATUS_OK
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -36,10 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     settings = get_settings()
     store = BlobStore(settings.blob_root)
     with session_scope(settings.resolved_database_url) as session:
-        trained = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == STATUS_OK)
-        row = session.execute(trained.order_by(m.Classifier.id.desc())).scalars().first()
-        if row is None:
-            parser.error("no trained substance network in this database: run the substances stage first")
+        row = newest_substance_network(session)
         network, side, network_id = load_substance_network(row, store, "cpu"), read_side_of(row.config), row.id
     print(assign_part_substances(settings, network_id, network, side, bn_prior=prior, store=store))
     return 0

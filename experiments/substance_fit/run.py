@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
-from experiments.common import results_dir
+from experiments.common import newest_substance_network, results_dir
 from experiments.small_parts.run import read, vote, world_photos
 from photoshape_flow.classify.substance_configs import read_side_of
 from photoshape_flow.config import Settings, get_settings
@@ -134,22 +134,11 @@ def compare(first: Path, second: Path) -> None:
               f"B - A {diff.value:+.3f} ({diff.low:+.3f}, {diff.high:+.3f})")
 
 
-def newest_network(session: Any, network: int | None = None) -> Any:
-    """The newest trained substance network's row (or `network`'s)."""
-    query = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == "ok")
-    if network is not None:
-        query = query.where(m.Classifier.id == network)
-    row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
-    if row is None:
-        raise SystemExit("no trained substance network in this data root: run the substances stage first")
-    return row
-
-
 def other_member(root: Path) -> tuple[Member, str]:
     """The newest trained substance network of another data root (its database and blobs), and its id."""
     settings = Settings(data_root=root, database_url=None, blob_root=None)
     with session_scope(settings.resolved_database_url) as session:
-        row = newest_network(session)
+        row = newest_substance_network(session)
         network = load_substance_network(row, BlobStore(settings.blob_root), "cpu")
         return (network, read_side_of(row.config) or 128), f"{root.name}:{row.id}"
 
@@ -174,7 +163,7 @@ def main() -> None:
     store = BlobStore(settings.blob_root)
     others = [other_member(root) for root in args.others]
     with session_scope(settings.resolved_database_url) as session:  # read-only
-        row = newest_network(session, args.network)
+        row = newest_substance_network(session, args.network)
         members = [(load_substance_network(row, store, "cpu"), read_side_of(row.config) or 128)]
         members += [member for member, _ in others]
         label = "+".join([str(row.id), *(name for _, name in others)])

@@ -25,3 +25,22 @@ def test_reads_outside_the_vocabulary_are_not_scored_and_photos_keep_their_parts
     reads = [("p1", "leather", "background", 0.3), ("p1", "fabric", "fabric", 0.3), ("p2", "wood", "metal", 0.3)]
     assert summarise(reads, small=0.015)["parts"] == 2
     assert by_photo(reads) == {"p1": [0.0, 1.0], "p2": [0.0]}
+
+
+def test_an_ensemble_averages_every_member_at_every_scale_of_its_read_size(monkeypatch) -> None:
+    import numpy as np
+    from experiments.substance_fit import run
+
+    seen: list[tuple[str, int]] = []
+
+    def fake_read(network: str, size: int, rgb: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        seen.append((network, size))
+        probs = np.zeros((6, *labels.shape), np.float32)
+        probs[1 if network == "a" else 2] = 1.0
+        return probs
+
+    monkeypatch.setattr(run, "read", fake_read)
+    labels = np.ones((4, 4), np.int64)
+    probs = run.read_members([("a", 256), ("b", 128)], [1.0, 0.75], np.zeros((4, 4, 3), np.uint8), labels)
+    assert seen == [("a", 256), ("a", 192), ("b", 128), ("b", 96)]  # scales rounded to the network's 32 px step
+    assert np.allclose(probs[1], 0.5) and np.allclose(probs[2], 0.5) and np.allclose(probs.sum(0), 1.0)
