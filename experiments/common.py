@@ -27,6 +27,7 @@ from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.networks.calibrations import material_lab
+from photoshape_flow.networks.classifier_rows import newest_classifier
 from photoshape_flow.networks.classifiers import load_substance_network
 from photoshape_flow.recognition.calibration import fit_color_evidence
 from photoshape_flow.recognition.substance_temperature import substance_temperature
@@ -95,11 +96,8 @@ class Evidence:
 
 def newest_substance_network(session: Session, network: int | None = None) -> Any:
     """The newest trained (status ok) substance network's row, or `network`'s; exits naming the gap."""
-    query = sa.select(m.Classifier).where(m.Classifier.kind == "substance", m.Classifier.status == STATUS_OK)
-    if network is not None:
-        query = query.where(m.Classifier.id == network)
-    row = session.execute(query.order_by(m.Classifier.id.desc())).scalars().first()
-    if row is None:
+    row = newest_classifier(session, "substance") if network is None else session.get(m.Classifier, network)
+    if row is None or row.kind != "substance" or row.status != STATUS_OK:
         raise SystemExit("no trained substance network in this data root: run the substances stage first")
     return row
 
