@@ -11,7 +11,8 @@ reads every part of four sets with the stage's own vote (`classify.substance_par
 against its true substance: the bootstrap renders it trained on, as it saw them (`train`); the
 bootstrap renders held out by shape and envmap (`val`); the same held-out renders degraded and
 framed like exemplars, their part maps misaligned (`val, photo-like`: `networks.validation_photos`);
-and, with `--groundtruth`, the world's exemplars through their CRF maps. The steps between the sets
+and, with `--groundtruth`, the world's exemplars through their CRF maps, also split into the photos
+showing collection materials and those showing only variants of them (`open_library`). The steps between the sets
 attribute the loss: fitting, generalisation, degradation, the world. Per set: accuracy, small parts
 (under `--small` of the map) and larger ones, recall per substance and the confusion matrix; reads
 per photo are kept so that `--compare` pairs two networks over the same photos (B minus A, 95%
@@ -40,10 +41,12 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import difference_interval
+from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.hashing import item_seed
 from photoshape_flow.networks.classifiers import load_substance_network
 from photoshape_flow.networks.validation_photos import calibration_photo, exemplar_size
 from photoshape_flow.recognition.substances import load_label_blob
+from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCES
@@ -121,6 +124,14 @@ def read_parts(photos: Iterator[Photo], members: list[Member], scales: list[floa
     return out
 
 
+def open_library_photos(session: Any, groundtruth: Path, source: str | None) -> set[str]:
+    """The world's photos whose parts all show materials outside the collection (the world's
+    `open_library` share: hue, roughness and tile variants), by the keys `world_photos` gives them."""
+    stems = {e["source_id"] for e in json.loads(groundtruth.read_text())["exemplars"] if e.get("open_library")}
+    matched = match_groundtruth(session, read_groundtruth_file(groundtruth), source)
+    return {f"exemplar/{eid}" for eid, stem in matched.source_ids.items() if stem in stems}
+
+
 def compare(first: Path, second: Path) -> None:
     """B minus A per set, paired over the photos both read."""
     a, b = (json.loads(path.read_text()) for path in (first, second))
@@ -178,8 +189,14 @@ def main() -> None:
             del sets["train"]
         if args.groundtruth is not None:
             sets["world"] = world_photos(session, store, args.groundtruth, args.source)
+        splits: dict[str, list[Read]] = {}
         for name, photos in sets.items():
-            reads = read_parts(photos, members, args.scales)
+            splits[name] = read_parts(photos, members, args.scales)
+        if args.groundtruth is not None:  # the world's two shares: materials in the collection, or variants
+            shown = open_library_photos(session, args.groundtruth, args.source)
+            for share, wanted in (("world, library", False), ("world, open library", True)):
+                splits[share] = [r for r in splits["world"] if (r[0] in shown) == wanted]
+        for name, reads in splits.items():
             results["sets"][name] = {**summarise(reads, args.small), "by_photo": by_photo(reads)}
             cell = results["sets"][name]
             recall = ", ".join(f"{k} {v:.2f}" for k, v in cell["recall"].items())

@@ -44,3 +44,19 @@ def test_an_ensemble_averages_every_member_at_every_scale_of_its_read_size(monke
     probs = run.read_members([("a", 256), ("b", 128)], [1.0, 0.75], np.zeros((4, 4, 3), np.uint8), labels)
     assert seen == [("a", 256), ("a", 192), ("b", 128), ("b", 96)]  # scales rounded to the network's 32 px step
     assert np.allclose(probs[1], 0.5) and np.allclose(probs[2], 0.5) and np.allclose(probs.sum(0), 1.0)
+
+
+def test_the_worlds_open_library_photos_are_found_by_the_keys_world_photos_gives(monkeypatch, tmp_path) -> None:
+    import json
+    from types import SimpleNamespace
+
+    from experiments.substance_fit import run
+
+    truth = tmp_path / "groundtruth.json"
+    truth.write_text(json.dumps({"exemplars": [{"source_id": "e0", "open_library": False},
+                                               {"source_id": "e1", "open_library": True},
+                                               {"source_id": "e4", "open_library": True}]}))
+    monkeypatch.setattr(run, "read_groundtruth_file", lambda path: path)
+    monkeypatch.setattr(run, "match_groundtruth",  # e4 did not match an ingested exemplar
+                        lambda session, gt, source: SimpleNamespace(source_ids={7: "e0", 9: "e1"}))
+    assert run.open_library_photos(None, truth, "second-world") == {"exemplar/9"}

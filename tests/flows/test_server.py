@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import os
-import re
 import subprocess
 import sys
 import time
@@ -141,7 +140,6 @@ def test_compose_deploy_and_worker_commands_run_natively(prefect_server: dict[st
     bin_dir = str(Path(sys.executable).parent)
     env = {**os.environ, **prefect_server, "PHOTOSHAPE_DATA_ROOT": str(data_root), "DO_NOT_TRACK": "1",
            "PHOTOSHAPE_DATABASE_URL": pg_url, "PATH": f"{bin_dir}:{os.environ.get('PATH', '')}"}
-    prefect = str(Path(sys.executable).with_name("prefect"))
     command, cwd = compose_command("deploy")
     deployed = subprocess.run(command, env=env, cwd=cwd, capture_output=True, text=True)
     assert deployed.returncode == 0, deployed.stdout[-2000:] + deployed.stderr[-2000:]
@@ -157,15 +155,18 @@ def test_compose_deploy_and_worker_commands_run_natively(prefect_server: dict[st
 
     _client_call(env, drop_leftovers)
     worker_command, _ = compose_command("worker")
-    workers = [subprocess.Popen([*worker_command, "--name", f"w{i}"], env=env, cwd=tmp_path,
+    polling = {**env, "PREFECT_WORKER_QUERY_SECONDS": "2"}  # the default 10 s poll is idle time in a test
+    workers = [subprocess.Popen([*worker_command, "--name", f"w{i}"], env=polling, cwd=tmp_path,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(2)]
     try:
-        run_ids: list[str] = []
-        for method in ("color-match", "no-classifier"):
-            out = subprocess.run([prefect, "deployment", "run", "inference/inference", "--param", "profile=tiny",
-                                  "--param", f'overrides=["inference.methods={method}"]', "--param", "batch_size=2"],
-                                 env=env, capture_output=True, text=True, check=True)
-            run_ids += re.findall(r"UUID: ([0-9a-f-]{36})", out.stdout)
+        async def start_runs(client):  # type: ignore[no-untyped-def]
+            # through the API, as `prefect deployment run` does (its CLI start costs seconds a call)
+            deployment = await client.read_deployment_by_name("inference/inference")
+            return [str((await client.create_flow_run_from_deployment(deployment.id, parameters={
+                "profile": "tiny", "overrides": [f"inference.methods={method}"], "batch_size": 2})).id)
+                for method in ("color-match", "no-classifier")]
+
+        run_ids: list[str] = _client_call(env, start_runs)
         assert len(run_ids) == 2, run_ids
 
         async def states(client):  # type: ignore[no-untyped-def]
