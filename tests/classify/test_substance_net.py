@@ -21,7 +21,6 @@ from photoshape_flow.classify.substance_train import (
     metrics_from_confusion,
     part_weights,
     predict_substances,
-    recolour_parts,
     train_substance_net,
 )
 
@@ -187,34 +186,3 @@ def test_a_network_trained_on_crops_reads_whole_images_at_its_read_size() -> Non
     assert read_side_of(result.checkpoint["config"]) == 64 and config.read_side == 64
     assert read_side_of(replace(config, read_size=0).to_dict()) == 32
     assert "read_size" not in replace(config, read_size=0).to_dict()  # old rows keep their hashes
-
-
-def test_recolouring_gives_each_part_its_own_hue_and_keeps_luma_and_background() -> None:
-    """Two parts of one grey-brown colour come out in different colours; shading (luma) is untouched."""
-    image = np.zeros((8, 8, 3), np.float32)
-    image[:] = (0.55, 0.4, 0.25)  # one brown for both parts, as a collection's leather and wood share it
-    image[..., :] *= np.linspace(0.6, 1.0, 8, dtype=np.float32)[:, None, None]  # shading down the image
-    parts = np.zeros((8, 8), np.uint16)
-    parts[:, :4], parts[:, 4:6] = 1, 2  # columns 6-7: background
-    config = replace(get_config("tiny"), part_hue=0.5, part_saturation=0.5)
-    out = recolour_parts(image.copy(), parts, config, np.random.default_rng(3))
-    luma = np.array([0.299, 0.587, 0.114], np.float32)
-    assert np.allclose(out @ luma, image @ luma, atol=0.02)  # in-gamut browns: only chroma moves
-    assert np.array_equal(out[:, 6:], image[:, 6:])
-    chroma = lambda region: region.reshape(-1, 3).mean(0) - region.reshape(-1, 3).mean()  # noqa: E731
-    assert np.abs(chroma(out[:, :4]) - chroma(out[:, 4:6])).max() > 0.03  # the parts now differ in colour
-    assert not np.allclose(out[:, :4], image[:, :4], atol=0.02)
-    again = recolour_parts(image.copy(), parts, config, np.random.default_rng(3))
-    assert np.array_equal(out, again)  # drawn from the run's generator: a resumed epoch sees the same
-
-
-def test_part_recolouring_trains_on_part_maps_and_leaves_old_rows_as_they_were() -> None:
-    torch.set_num_threads(2)
-    data = toy_substances(4)
-    config = get_config("tiny", epochs=1, iters_per_epoch=2, part_hue=0.5, part_saturation=0.3)
-    with pytest.raises(ValueError, match="part maps"):
-        train_substance_net(data, None, config)
-    parts = [label.astype(np.uint16) for label in data.labels]
-    result = train_substance_net(SubstanceData(data.images, data.labels, [], parts), None, config)
-    assert result.checkpoint["config"]["part_hue"] == 0.5
-    assert not {"part_hue", "part_saturation"} & set(get_config("tiny").to_dict())

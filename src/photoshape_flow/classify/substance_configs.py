@@ -39,11 +39,6 @@ class SubstanceTrainConfig:
     # each part's pixels weigh (part area)^-part_balance in the loss (`substance_train.part_weights`);
     # 0: the plain per-pixel loss
     part_balance: float = 0.0
-    # per-part recolouring of the training crops: each part's chroma rotated by up to `part_hue` of a
-    # turn and scaled by U(1 -+ `part_saturation`), drawn per part, so that a part's colour says little
-    # of its substance and the network must read grain, gloss and shading (0, 0: off). Needs part maps.
-    part_hue: float = 0.0
-    part_saturation: float = 0.0
     # the side a whole image (a photo, a validation render) is read at; 0: `size`. Above `size` the
     # network trains on `size` crops cut from renders at this scale (`crop_scale` is then a fraction of
     # their area), so it learns parts at the finer pixel pitch it reads them at, for the same cost a step
@@ -56,10 +51,6 @@ class SubstanceTrainConfig:
     @property
     def uses_backbone(self) -> bool:
         return self.arch != "unet"
-
-    @property
-    def recolours_parts(self) -> bool:
-        return bool(self.part_hue or self.part_saturation)
 
     @property
     def read_side(self) -> int:
@@ -75,9 +66,8 @@ class SubstanceTrainConfig:
         data["crop_scale"] = list(self.crop_scale)
         if not self.uses_backbone:  # the segmentation network's rows (and hashes) stay as they were
             data.pop("arch")
-        for key in ("part_balance", "part_hue", "part_saturation"):  # off: rows (and hashes) stay as they were
-            if not data[key]:
-                data.pop(key)
+        if not self.part_balance:
+            data.pop("part_balance")
         if not self.read_size:
             data.pop("read_size")
         return data

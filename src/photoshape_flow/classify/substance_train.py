@@ -4,10 +4,8 @@ Data: bootstrap renders (sRGB on white) with their per-pixel `substance_ids` lab
 first cut to the square around its object (``frame_object``), as exemplars are cropped. Augmentation
 per sample: an optional random Gaussian blur (sigma ~ U(0, ``blur``), against the renders' sampling
 noise), random square crop covering `crop_scale` of the area, resized to `size`; horizontal flip;
-optionally each part's own chroma turned and scaled (``part_hue``, ``part_saturation``:
-`recolour_parts`, from the part maps); colour jitter (brightness, contrast, saturation). Framing,
-blur and part recolouring are off in every preset: framing and blur measured worse on the medium
-demo (docs/decisions.md, D4), recolouring on the held-out renders (D76).
+colour jitter (brightness, contrast, saturation). Framing and blur are off in every preset: they
+measured worse on the medium demo (docs/decisions.md, D4).
 Loss: per-pixel cross-entropy with class weights ~ frequency^-1/2 (the white background dominates
 the pixels); with ``part_balance`` p > 0 each part's pixels also weigh (part area)^-p, from the
 renders' part maps (`part_weights`). AdamW with a cosine learning-rate
@@ -103,8 +101,7 @@ def _resize(array: np.ndarray, size: int, nearest: bool) -> np.ndarray:
 def augment(
     image: np.ndarray, label: np.ndarray, config: SubstanceTrainConfig, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Random blur, square crop + resize, flip, part recolouring, colour jitter; float32 (H, W, 3) in
-    [0, 1] and labels.
+    """Random blur, square crop + resize, flip, colour jitter; float32 (H, W, 3) in [0, 1] and labels.
 
     `label` is (H, W) or (H, W, C) (e.g. substances and parts stacked): every channel follows the crop.
     """
@@ -125,8 +122,6 @@ def augment(
     if config.flip and rng.random() < 0.5:
         img, lab = img[:, ::-1], lab[:, ::-1]
     out = img.astype(np.float32) / 255.0
-    if config.recolours_parts:
-        out = recolour_parts(out, lab[..., 1] if lab.ndim == 3 else lab, config, rng)
     j = config.jitter
     if j > 0:
         out = out * rng.uniform(1 - j, 1 + j)
@@ -135,33 +130,6 @@ def augment(
         grey = out.mean(axis=2, keepdims=True)
         out = grey + (out - grey) * rng.uniform(1 - j, 1 + j)
     return np.clip(out, 0.0, 1.0), np.ascontiguousarray(lab)
-
-
-_RGB_TO_YIQ = np.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]], np.float32)
-_YIQ_TO_RGB = np.linalg.inv(_RGB_TO_YIQ).astype(np.float32)
-
-
-def recolour_parts(image: np.ndarray, parts: np.ndarray, config: SubstanceTrainConfig,
-                   rng: np.random.Generator) -> np.ndarray:
-    """Each part (`parts` > 0) of a float (H, W, 3) image its own chroma rotation and scale, luma kept.
-
-    A rotation of the (I, Q) plane of YIQ changes a part's hue and leaves its shading, highlights'
-    brightness and grain contrast as rendered: a leather seat may come out green and a wood leg blue,
-    so only what is not colour tells their substances apart. Parts are drawn in increasing id order,
-    so a crop's draws do not depend on which pixels it kept of other parts.
-    """
-    out = image.copy()
-    for part in np.unique(parts):
-        if part == 0:
-            continue
-        angle = 2 * math.pi * float(rng.uniform(-config.part_hue, config.part_hue))
-        scale = max(0.0, float(rng.uniform(1 - config.part_saturation, 1 + config.part_saturation)))
-        cos, sin = math.cos(angle) * scale, math.sin(angle) * scale
-        chroma = np.array([[1.0, 0.0, 0.0], [0.0, cos, -sin], [0.0, sin, cos]], np.float32)
-        matrix = _YIQ_TO_RGB @ chroma @ _RGB_TO_YIQ  # RGB -> YIQ, (I, Q) turned and scaled, back
-        inside = parts == part
-        out[inside] = np.clip(image[inside] @ matrix.T, 0.0, 1.0)
-    return out
 
 
 _SLIVER_FRACTION_INVERSE = 1024
@@ -323,10 +291,9 @@ def train_substance_net(
         weights = np.asarray(checkpoint.get("class_weights", weights), np.float32)
     weight_t = torch.from_numpy(weights).to(device)
     balance = float(config.part_balance)
-    stacked = balance > 0 or config.recolours_parts
-    if stacked and train.parts is None:
-        raise ValueError("part_balance and part recolouring need the training renders' part maps")
-    stacks = train.label_stacks() if stacked else train.labels
+    if balance > 0 and train.parts is None:
+        raise ValueError("part_balance needs the training renders' part maps")
+    stacks = train.label_stacks() if balance > 0 else train.labels
     iters = config.iters_per_epoch or max(1, math.ceil(len(train) / config.batch_size))
     total_iters = iters * config.epochs
     epochs_run: list[int] = []
@@ -344,7 +311,7 @@ def train_substance_net(
             pairs = [augment(train.images[i], stacks[i], config, rng) for i in idx]
             x = _to_tensor([p[0] for p in pairs]).to(device)
             maps = np.stack([p[1] for p in pairs]).astype(np.int64)
-            y = torch.from_numpy(maps[..., 0] if stacked else maps).to(device)
+            y = torch.from_numpy(maps[..., 0] if balance > 0 else maps).to(device)
             for group in optimizer.param_groups:
                 group["lr"] = _lr_at(config, (epoch - 1) * iters + it, total_iters)
             if balance > 0:
