@@ -41,12 +41,10 @@ from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
 from photoshape_flow.evaluation.bootstrap import difference_interval
-from photoshape_flow.evaluation.groundtruth import read_groundtruth_file
 from photoshape_flow.hashing import item_seed
 from photoshape_flow.networks.classifiers import load_substance_network
 from photoshape_flow.networks.validation_photos import calibration_photo, exemplar_size
 from photoshape_flow.recognition.substances import load_label_blob
-from photoshape_flow.scoring.groundtruth_match import match_groundtruth
 from photoshape_flow.store import BlobStore
 from photoshape_flow.synth.spec import RenderSpec
 from photoshape_flow.vocab import SUBSTANCES
@@ -127,9 +125,11 @@ def read_parts(photos: Iterator[Photo], members: list[Member], scales: list[floa
 def open_library_photos(session: Any, groundtruth: Path, source: str | None) -> set[str]:
     """The world's photos whose parts all show materials outside the collection (the world's
     `open_library` share: hue, roughness and tile variants), by the keys `world_photos` gives them."""
-    stems = {e["source_id"] for e in json.loads(groundtruth.read_text())["exemplars"] if e.get("open_library")}
-    matched = match_groundtruth(session, read_groundtruth_file(groundtruth), source)
-    return {f"exemplar/{eid}" for eid, stem in matched.source_ids.items() if stem in stems}
+    stems = [e["source_id"] for e in json.loads(groundtruth.read_text())["exemplars"] if e.get("open_library")]
+    query = sa.select(m.Exemplar.id).where(m.Exemplar.source_id.in_(stems))
+    if source is not None:
+        query = query.where(m.Exemplar.source == source)
+    return {f"exemplar/{eid}" for eid in session.execute(query).scalars()}
 
 
 def compare(first: Path, second: Path) -> None:

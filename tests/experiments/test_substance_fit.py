@@ -46,17 +46,22 @@ def test_an_ensemble_averages_every_member_at_every_scale_of_its_read_size(monke
     assert np.allclose(probs[1], 0.5) and np.allclose(probs[2], 0.5) and np.allclose(probs.sum(0), 1.0)
 
 
-def test_the_worlds_open_library_photos_are_found_by_the_keys_world_photos_gives(monkeypatch, tmp_path) -> None:
+def test_the_worlds_open_library_photos_are_found_by_the_keys_world_photos_gives(db_url: str, tmp_path) -> None:
     import json
-    from types import SimpleNamespace
 
     from experiments.substance_fit import run
+
+    from photoshape_flow.db import models as m
+    from photoshape_flow.db.session import session_scope
 
     truth = tmp_path / "groundtruth.json"
     truth.write_text(json.dumps({"exemplars": [{"source_id": "e0", "open_library": False},
                                                {"source_id": "e1", "open_library": True},
                                                {"source_id": "e4", "open_library": True}]}))
-    monkeypatch.setattr(run, "read_groundtruth_file", lambda path: path)
-    monkeypatch.setattr(run, "match_groundtruth",  # e4 did not match an ingested exemplar
-                        lambda session, gt, source: SimpleNamespace(source_ids={7: "e0", 9: "e1"}))
-    assert run.open_library_photos(None, truth, "second-world") == {"exemplar/9"}
+    with session_scope(db_url) as session:  # e4 is not ingested; another source's e1 is not the world's
+        rows = [m.Exemplar(source=source, source_id=stem)
+                for source, stem in (("world", "e0"), ("world", "e1"), ("other", "e1"))]
+        session.add_all(rows)
+        session.flush()
+        assert run.open_library_photos(session, truth, "world") == {f"exemplar/{rows[1].id}"}
+        assert run.open_library_photos(session, truth, None) == {f"exemplar/{rows[1].id}", f"exemplar/{rows[2].id}"}
