@@ -20,6 +20,7 @@ from photoshape_flow.db.base import (
     TimestampMixin,
     fk,
 )
+from photoshape_flow.vocab import AUX_SPLIT
 
 
 class Shape(SourcedItemMixin, TimestampMixin, StatusMixin, ExcludeMixin, ProvenanceMixin, ParamsHashMixin, Base):
@@ -38,6 +39,11 @@ class Shape(SourcedItemMixin, TimestampMixin, StatusMixin, ExcludeMixin, Provena
     parts: Mapped[list[Part]] = relationship(
         back_populates="shape", cascade="all, delete-orphan", order_by="Part.index", passive_deletes=True
     )
+
+
+def aligned_shape() -> sa.ColumnElement[bool]:
+    """The shapes coarse alignment pairs with photos: every split but `aux` (bootstrap renders only)."""
+    return Shape.split != AUX_SPLIT
 
 
 class Part(TimestampMixin, Base):
