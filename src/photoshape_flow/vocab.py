@@ -39,11 +39,6 @@ RENDERING_KINDS: tuple[str, ...] = (
     "exemplar-gt",    # demo: ground-truth render behind a synthetic exemplar
 )
 
-# Shape splits: `aux` shapes take no part in coarse alignment (no pairs, no photos) and only add
-# shapes to the substance network's bootstrap renders (`recognition.render_pools`).
-AUX_SPLIT = "aux"
-SHAPE_SPLITS: tuple[str, ...] = ("train", "val", AUX_SPLIT)
-
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"
 STATUS_REJECTED = "rejected"

@@ -5,15 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import sqlalchemy as sa
 from tests.geometry.makers import write_chair_obj, write_png
 from tests.imaging.test_exemplar import photo
 from tests.imaging.test_hdr import sky, write_hdr
 from typer.testing import CliRunner
 
 from photoshape_flow.cli import app
-from photoshape_flow.db import models as m
-from photoshape_flow.db.session import session_scope
 
 runner = CliRunner()
 
@@ -61,13 +58,6 @@ def test_ingest_without_rejections_exits_zero(db_url: str, tmp_path: Path) -> No
     result = runner.invoke(app, ["ingest", "shapes", str(tmp_path / "shapes"), "--category", "chair", "--no-isolate"])
     assert result.exit_code == 0, result.output
     assert "rejected" in result.output and "inputs rejected" not in result.output  # the column, no rejection line
-    # re-ingested as an auxiliary shape (bootstrap renders only): the split moves, other splits are refused
-    result = runner.invoke(app, ["ingest", "shapes", str(tmp_path / "shapes"), "--split", "aux", "--no-isolate"])
-    assert result.exit_code == 0, result.output
-    with session_scope(db_url) as session:
-        assert session.execute(sa.select(m.Shape.split)).scalars().all() == ["aux"]
-    result = runner.invoke(app, ["ingest", "shapes", str(tmp_path / "shapes"), "--split", "test"])
-    assert result.exit_code != 0 and "--split must be train or val or aux" in result.output
 
 
 def test_unmigrated_database_is_reported(settings_env: Path, tmp_path: Path) -> None:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import cv2
 import numpy as np
 import pytest
@@ -13,9 +11,9 @@ from tests.synth.collection import seed_collection
 from photoshape_flow.config import get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
-from photoshape_flow.recognition.render_pools import AUX_SHARE, derived_val_shapes, load_pools
+from photoshape_flow.recognition.render_pools import derived_val_shapes, load_pools
 from photoshape_flow.recognition.training_renders import run_training_renders
-from photoshape_flow.synth.spec import RenderSpec, item_key, metered_gains, spec_for_key
+from photoshape_flow.synth.spec import RenderSpec, metered_gains
 
 
 def _label_map(store, ref: str) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -207,31 +205,3 @@ def test_metered_exposure_scales_each_map_to_the_median_and_re_renders(db_url: s
         assert radiance / before[key][1] == pytest.approx(expected, rel=0.1)
     with pytest.raises(ValueError, match="exposure"):
         run_training_renders("bootstrap", count=1, size=32, spp=2, exposure="auto")
-
-
-def test_auxiliary_shapes_are_a_share_of_bootstrap_train_draws_only(db_url: str, store) -> None:  # type: ignore[no-untyped-def]
-    with session_scope(db_url) as session:
-        col = seed_collection(session, store, shape_splits=("train", "train", "val", "aux"))
-    aux_id = next(sid for sid, split in col.shapes.items() if split == "aux")
-    with session_scope(db_url) as session:
-        bootstrap = load_pools(session, "bootstrap")
-        training = load_pools(session, "training")
-        aligned = set(session.execute(sa.select(m.Shape.id).where(m.aligned_shape())).scalars())
-    # coarse alignment never sees the shape, so it has no pair: the one seeded here is left out too
-    assert aux_id not in aligned and len(aligned) == 3
-    assert [c.shape_id for c in bootstrap.priors["train"].aux] == [aux_id]
-    assert all(c.shape_id != aux_id for s in ("train", "val") for c in bootstrap.priors[s].candidates)
-    assert not bootstrap.priors["val"].aux and not training.priors["train"].aux and aux_id not in bootstrap.shape_split
-
-    def draws(pools, split: str) -> list[int]:  # type: ignore[no-untyped-def]
-        return [spec_for_key(item_key("bootstrap", split, i), 0, pair_pose_prior=pools.priors[split],
-                             parts=pools.parts, materials_by_substance=pools.materials_by_substance,
-                             envmaps=pools.envmaps[split], round_="bootstrap", split=split).shape_id
-                for i in range(400)]
-
-    train = draws(bootstrap, "train")
-    assert abs(train.count(aux_id) / len(train) - AUX_SHARE) < 0.06
-    assert aux_id not in draws(bootstrap, "val")
-    # the items that do not draw it are the items a collection without it renders
-    without = replace(bootstrap, priors={**bootstrap.priors, "train": replace(bootstrap.priors["train"], aux=())})
-    assert [a for a, b in zip(train, draws(without, "train"), strict=True) if a != b] == [aux_id] * train.count(aux_id)

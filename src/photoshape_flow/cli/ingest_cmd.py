@@ -20,7 +20,6 @@ from rich.table import Table
 
 from photoshape_flow.cli.common import console, err_console, fail, require_database, shown
 from photoshape_flow.cli.progress import cli_progress
-from photoshape_flow.vocab import SHAPE_SPLITS
 
 ingest_app = typer.Typer(help="Ingest shapes, exemplars, materials and envmaps.", no_args_is_help=True)
 
@@ -50,12 +49,12 @@ def _setup_logging(verbose: bool) -> None:
         package.addHandler(logging.NullHandler())
 
 
-def _start(verbose: bool, split: str | None = None, splits: tuple[str, ...] = ("train", "val")) -> None:
+def _start(verbose: bool, split: str | None = None) -> None:
     """What every ingest verb checks before its stage runs, so each refuses bad input the same way."""
     _setup_logging(verbose)
     require_database()
-    if split not in (None, *splits):
-        fail(f"--split must be {' or '.join(splits)}, not {split!r}")
+    if split not in (None, "train", "val"):
+        fail(f"--split must be train or val, not {split!r}")
 
 
 @contextmanager
@@ -143,9 +142,7 @@ def shapes(
         None, help="Catalogs/ShapeNet: keep these categories (comma-separated, e.g. chair,sofa). "
         "Plain files: the category to record."),
     name_filter: str | None = typer.Option(None, "--name-filter", help="Regular expression on names/ids/tags."),
-    split: str | None = typer.Option(
-        None, help="Force 'train' or 'val' (default: hash-based 90/10); 'aux': shapes that only widen the "
-        "substance network's bootstrap renders (no coarse alignment)."),
+    split: str | None = typer.Option(None, help="Force 'train' or 'val' (default: hash-based 90/10)."),
     license: str | None = typer.Option(None, "--license", help="Licence to record (catalogs bring their own)."),
     attribution: str | None = AttributionOpt,
     max_faces: int = typer.Option(500_000, help="Reject shapes with more triangles."),
@@ -159,7 +156,7 @@ def shapes(
     """OBJ+MTL, glTF/GLB, ShapeNetCore v2 trees and Sweet Home 3D catalogs (.sh3f)."""
     from photoshape_flow.ingest.ingest import IngestLimits, ingest_shapes
 
-    _start(verbose, split, SHAPE_SPLITS)
+    _start(verbose, split)
     limits = IngestLimits(max_faces=max_faces, max_shape_bytes=int(max_file_mb * 1024 * 1024), timeout_s=timeout)
     try:
         with _progress("shapes") as progress:

@@ -53,7 +53,7 @@ from photoshape_flow.ingest.common import (
 )
 from photoshape_flow.inputs import ChangedWhileReadingError, check_unchanged
 from photoshape_flow.store import BlobStore
-from photoshape_flow.vocab import SHAPE_SPLITS, STATUS_FAILED, STATUS_OK, STATUS_REJECTED
+from photoshape_flow.vocab import STATUS_FAILED, STATUS_OK, STATUS_REJECTED
 
 logger = logging.getLogger(__name__)
 
@@ -264,12 +264,12 @@ def ingest_shapes(
 
     `category`: for ShapeNet and catalogs a filter (comma-separated), for plain files the category
     to record. `name_filter`: regular expression on names/ids/tags. `split`: force "train"/"val"
-    (default: deterministic 90/10 from a hash of source and source_id) or "aux" (bootstrap renders
-    only). `isolate`: parse and preprocess in a child process so a crashing native library costs one item.
+    (default: deterministic 90/10 from a hash of source and source_id). `isolate`: parse and
+    preprocess in a child process so a crashing native library costs one item.
     """
     settings = resolve_settings(settings)
-    if split not in (None, *SHAPE_SPLITS):
-        raise ValueError(f"split must be one of {SHAPE_SPLITS}, got {split!r}")
+    if split not in (None, "train", "val"):
+        raise ValueError(f"split must be 'train' or 'val', got {split!r}")
     url = settings.resolved_database_url
     store = store if store is not None else store_for(settings)
     limits = limits or IngestLimits.from_settings(settings)

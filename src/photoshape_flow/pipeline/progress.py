@@ -106,7 +106,7 @@ def coarse_alignment_progress(session: Session) -> StageProgress:
     ex_features = sa.select(m.ExemplarFeature.exemplar_id).where(
         m.ExemplarFeature.descriptor.startswith(COARSE_DESCRIPTOR_PREFIX)
     )
-    shapes_ok = sa.select(m.Shape.id).where(m.Shape.status == "ok", ~m.Shape.exclude, m.aligned_shape())
+    shapes_ok = sa.select(m.Shape.id).where(m.Shape.status == "ok", ~m.Shape.exclude)
     shapes_done = view_features.where(m.ViewFeature.status == "ok")
     shapes_failed = view_features.where(m.ViewFeature.status != "ok")
     exemplars_ok = sa.select(m.Exemplar.id).where(m.Exemplar.status == "ok", ~m.Exemplar.exclude)

@@ -5,19 +5,13 @@ usable shapes with their parts, the pose prior of the coarse-alignment pairs, th
 substance and the envmaps, each assigned to ``train`` or ``val``, and (training round) the part
 substances; `split_counts` divides a round's items between the splits. The render loop that samples
 from them is `recognition.training_renders`.
-
-Auxiliary shapes (`shape.split = 'aux'`: no photos, no pairs) widen the substance network's bootstrap
-renders only: `AUX_SHARE` of the bootstrap round's train items draw one of them, with the pairs' pose
-prior, so the network sees more shapes per substance than the collection's pairs hold. Validation
-items and the training round never draw them: what is measured and what the classifier learns stay
-the collection's.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import sqlalchemy as sa
@@ -26,15 +20,12 @@ from photoshape_flow.db import models as m
 from photoshape_flow.hashing import item_seed
 from photoshape_flow.synth.priors import observed_prior
 from photoshape_flow.synth.spec import PairCandidate, PairPosePrior, PartInfo
-from photoshape_flow.vocab import AUX_SPLIT, STATUS_OK, SUBSTANCES
+from photoshape_flow.vocab import STATUS_OK, SUBSTANCES
 
 Round = Literal["bootstrap", "training"]
 ROUNDS: tuple[str, ...] = ("bootstrap", "training")
 SPLITS: tuple[str, ...] = ("train", "val")
 VAL_FRACTION = 0.1
-# of the bootstrap round's train items, when auxiliary shapes exist: a quarter, so the collection's
-# own shapes keep most of the renders
-AUX_SHARE = 0.25
 
 
 def normalise_split(split: str | None) -> str:
@@ -85,8 +76,6 @@ def load_pools(session: sa.orm.Session, round: Round, val_fraction: float = VAL_
     ):
         parts[shape_id].append(PartInfo(part_id=part_id, index=index, name=name or ""))
     shapes = [s for s in shapes if parts.get(s.id)]
-    aux = tuple(PairCandidate(s.id, None) for s in shapes if s.split == AUX_SPLIT) if round == "bootstrap" else ()
-    shapes = [s for s in shapes if s.split != AUX_SPLIT]
     if not shapes:
         raise ValueError("no usable shape (status ok, not excluded, with a mesh and parts)")
 
@@ -168,8 +157,6 @@ def load_pools(session: sa.orm.Session, round: Round, val_fraction: float = VAL_
         for split in SPLITS:
             cands = [PairCandidate(sid, None) for sid in sorted(shape_split) if shape_split[sid] == split]
             priors[split] = PairPosePrior.default_poses(cands)
-    if aux:
-        priors["train"] = replace(priors["train"], aux=aux, aux_share=AUX_SHARE)
     return RenderPools(
         priors=priors,
         envmaps=envmaps,

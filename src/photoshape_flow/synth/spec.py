@@ -11,7 +11,7 @@ Sampling follows the paper, with the original code's bug fixed (its jitter was `
 a constant):
 
 1. a pair uniformly from the candidates of the item's split (shapes and envmaps are split, never
-   images), or, for `aux_share` of the items, an auxiliary shape without photos (bootstrap train items);
+   images);
 2. a camera pose uniformly from the pose prior (the azimuth/elevation of every coarse-alignment pair),
    jittered by U(-pi/12, pi/12) in azimuth and U(-pi/24, pi/24) in elevation, fov ~ U(50, 60) degrees,
    distance ~ U(1.3, 1.75);
@@ -107,9 +107,6 @@ class PairPosePrior:
     poses: tuple[tuple[float, float], ...]
     source: str = "pairs"
     pose_ids: tuple[int, ...] | None = None  # stable id per pose (the pair id); default: position
-    # shapes without photos (`render_pools.AUX_SHARE`): `aux_share` of the items draw one of them instead
-    aux: tuple[PairCandidate, ...] = ()
-    aux_share: float = 0.0
 
     def __post_init__(self) -> None:
         if self.pose_ids is not None and len(self.pose_ids) != len(self.poses):
@@ -253,12 +250,6 @@ def rendezvous_index(base: int, decision: str, ids: Sequence[int]) -> int:
     return int(np.argmax(scores))
 
 
-def hash_fraction(base: int, decision: str) -> float:
-    """A uniform number in [0, 1) from (base, decision) alone: a draw that consumes no generator state."""
-    with np.errstate(over="ignore"):
-        return float(_splitmix64(np.array([_salt(base, decision)], np.uint64))[0]) / 2.0**64
-
-
 def _draw_substance(u: float, prior: Mapping[str, float]) -> str:
     """Inverse-CDF draw over the prior in SUBSTANCES order, from one uniform number."""
     names = list(prior)
@@ -320,8 +311,6 @@ def sample_render_spec(
     env_rotation = float(rng.uniform(0.0, 2 * math.pi))
 
     candidates = pair_pose_prior.candidates
-    if pair_pose_prior.aux and hash_fraction(base, "aux") < pair_pose_prior.aux_share:
-        candidates = pair_pose_prior.aux
     candidate = candidates[
         rendezvous_index(
             base, "pair", [c.pair_id if c.pair_id is not None else -1 - c.shape_id for c in candidates]

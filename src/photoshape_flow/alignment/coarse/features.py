@@ -59,7 +59,7 @@ def compute_view_features(
         vpset = config_viewpoint_set(session, config)
         vp_id, cameras = vpset.id, cameras_from_rows(vpset.cameras)
         q = sa.select(m.Shape.id, m.Shape.mesh_blob).where(
-            m.Shape.status == "ok", ~m.Shape.exclude, m.Shape.mesh_blob.is_not(None), m.aligned_shape()
+            m.Shape.status == "ok", ~m.Shape.exclude, m.Shape.mesh_blob.is_not(None)
         )
         shapes = session.execute(_restricted(q, m.Shape, shape_ids, config.category)).all()
         existing = _feature_states(

@@ -163,7 +163,7 @@ def _usable_shapes(session: Session, config: CoarseConfig, vpset: m.ViewpointSet
         .where(
             m.ViewFeature.viewpoint_set_id == vpset.id, m.ViewFeature.descriptor == config.hog.name,
             m.ViewFeature.status == "ok", m.ViewFeature.feature_blob.is_not(None),
-            m.Shape.status == "ok", ~m.Shape.exclude, m.aligned_shape(),
+            m.Shape.status == "ok", ~m.Shape.exclude,
         )
     )
     if config.category is not None:

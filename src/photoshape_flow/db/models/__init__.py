@@ -14,7 +14,7 @@ and importing it registers every table on `Base.metadata` (what Alembic compares
 from __future__ import annotations
 
 from photoshape_flow.db.base import Base
-from photoshape_flow.db.models.catalog import Envmap, Exemplar, Material, Part, Shape, aligned_shape
+from photoshape_flow.db.models.catalog import Envmap, Exemplar, Material, Part, Shape
 from photoshape_flow.db.models.matching import (
     Alignment,
     ExemplarFeature,
@@ -35,5 +35,5 @@ ALL_TABLES: tuple[type[Base], ...] = (
 __all__ = [
     "ALL_TABLES", "Alignment", "Assignment", "Classifier", "Envmap", "Evaluation", "Exemplar", "ExemplarFeature",
     "ExemplarMatch", "Grade", "GroundTruthFileRow", "Material", "Pair", "Part", "PartSubstance", "PipelineRun",
-    "Rendering", "Shape", "ViewFeature", "ViewpointSet", "WorkClaim", "aligned_shape",
+    "Rendering", "Shape", "ViewFeature", "ViewpointSet", "WorkClaim",
 ]

@@ -20,7 +20,6 @@ from photoshape_flow.db.base import (
     TimestampMixin,
     fk,
 )
-from photoshape_flow.vocab import AUX_SPLIT
 
 
 class Shape(SourcedItemMixin, TimestampMixin, StatusMixin, ExcludeMixin, ProvenanceMixin, ParamsHashMixin, Base):
@@ -39,11 +38,6 @@ class Shape(SourcedItemMixin, TimestampMixin, StatusMixin, ExcludeMixin, Provena
     parts: Mapped[list[Part]] = relationship(
         back_populates="shape", cascade="all, delete-orphan", order_by="Part.index", passive_deletes=True
     )
-
-
-def aligned_shape() -> sa.ColumnElement[bool]:
-    """The shapes coarse alignment pairs with photos: every split but `aux` (bootstrap renders only)."""
-    return Shape.split != AUX_SPLIT
 
 
 class Part(TimestampMixin, Base):
