@@ -19,10 +19,8 @@ per photo are kept so that `--compare` pairs two networks over the same photos (
 bootstrap interval over photos). `--with ROOT` (repeatable) adds the newest trained substance network
 of another data root trained on the same renders (another seed, say): the members' probabilities are
 averaged before the vote, an ensemble. `--scales` reads each photo at these multiples of the read
-size and averages them too. `--last-step` reads a weight-averaged network (`ema_decay`) by its last
-step's weights instead, the same training without the average. Read-only; output
-`<data root>/experiments/substance_fit/network-ID.json`
-(ID: the members' ids joined by `+`, then `@` and the scales when not 1, then `-last-step`).
+size and averages them too. Read-only; output `<data root>/experiments/substance_fit/network-ID.json`
+(ID: the members' ids joined by `+`, then `@` and the scales when not 1).
 """
 
 from __future__ import annotations
@@ -39,7 +37,6 @@ import sqlalchemy as sa
 from experiments.common import newest_substance_network, results_dir
 from experiments.small_parts.run import read, vote, world_photos
 from photoshape_flow.classify.substance_configs import read_side_of
-from photoshape_flow.classify.substance_train import checkpoint_from_bytes, load_model
 from photoshape_flow.config import Settings, get_settings
 from photoshape_flow.db import models as m
 from photoshape_flow.db.session import session_scope
@@ -157,14 +154,6 @@ def other_member(root: Path) -> tuple[Member, str]:
         return (network, read_side_of(row.config) or 128), f"{root.name}:{row.id}"
 
 
-def last_step_network(row: Any, store: BlobStore) -> Any:
-    """A weight-averaged segmentation network's row read by the last step's weights it stores."""
-    checkpoint = checkpoint_from_bytes(store.read_bytes(row.checkpoint_blob))
-    if "train_model" not in checkpoint:
-        raise SystemExit(f"classifier {row.id}: no last-step weights (trained without ema_decay)")
-    return load_model({**checkpoint, "model": checkpoint["train_model"]})
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--groundtruth", type=Path, default=None, help="an evaluation world (attribution only)")
@@ -176,8 +165,6 @@ def main() -> None:
                         help="another data root whose newest substance network joins the ensemble")
     parser.add_argument("--scales", type=float, nargs="+", default=[1.0],
                         help="read at these multiples of the read size")
-    parser.add_argument("--last-step", action="store_true",
-                        help="a weight-averaged network read by its last step's weights (the same training unaveraged)")
     parser.add_argument("--skip-train", action="store_true", help="leave out the training renders (the slowest set)")
     args = parser.parse_args()
     if args.compare:
@@ -188,14 +175,11 @@ def main() -> None:
     others = [other_member(root) for root in args.others]
     with session_scope(settings.resolved_database_url) as session:  # read-only
         row = newest_substance_network(session, args.network)
-        first = last_step_network(row, store) if args.last_step else load_substance_network(row, store, "cpu")
-        members = [(first, read_side_of(row.config) or 128)]
+        members = [(load_substance_network(row, store, "cpu"), read_side_of(row.config) or 128)]
         members += [member for member, _ in others]
         label = "+".join([str(row.id), *(name for _, name in others)])
         if args.scales != [1.0]:
             label += "@" + ",".join(f"{s:g}" for s in args.scales)
-        if args.last_step:
-            label += "-last-step"
         results: dict[str, Any] = {"network": label, "name": row.name, "small": args.small,
                                    "scales": args.scales, "sets": {}}
         sets = {"train": bootstrap_photos(session, store, "train", False, settings.seed),

@@ -13,7 +13,6 @@ from photoshape_flow.classify.substance_configs import get_config, read_side_of
 from photoshape_flow.classify.substance_net import NUM_CLASSES, SubstanceNet
 from photoshape_flow.classify.substance_train import (
     SubstanceData,
-    WeightAverage,
     augment,
     checkpoint_from_bytes,
     checkpoint_to_bytes,
@@ -44,10 +43,9 @@ def test_overfits_a_tiny_batch() -> None:
     assert metrics["pixel_accuracy"] > 0.8
 
 
-@pytest.mark.parametrize("ema_decay", [0.0, 0.8])
-def test_resume_continues_from_the_last_epoch(ema_decay: float) -> None:
+def test_resume_continues_from_the_last_epoch() -> None:
     data, val = toy_substances(4, seed=1), toy_substances(2, seed=2)
-    config = replace(get_config("tiny"), epochs=3, iters_per_epoch=2, ema_decay=ema_decay)
+    config = replace(get_config("tiny"), epochs=3, iters_per_epoch=2)
     saved: list[bytes] = []
 
     class Interrupt(Exception):
@@ -69,46 +67,12 @@ def test_resume_continues_from_the_last_epoch(ema_decay: float) -> None:
 
     # the resumed run equals an uninterrupted one (per-epoch seeded streams, schedule from the iteration)
     straight = train_substance_net(data, val, config)
-    for key in ("model", "train_model") if ema_decay else ("model",):
-        for name, tensor in straight.checkpoint[key].items():
-            torch.testing.assert_close(tensor, resumed.checkpoint[key][name], rtol=1e-4, atol=1e-5)
+    for name, tensor in straight.checkpoint["model"].items():
+        torch.testing.assert_close(tensor, resumed.checkpoint["model"][name], rtol=1e-4, atol=1e-5)
 
     # finished checkpoints train nothing more
     again = train_substance_net(data, val, config, checkpoint=resumed.checkpoint)
     assert again.epochs_run == []
-
-
-def test_weight_average_is_the_exponential_moving_average_of_the_steps() -> None:
-    model = torch.nn.Sequential(torch.nn.Linear(2, 2), torch.nn.BatchNorm1d(2))
-    start = {k: v.clone() for k, v in model.state_dict().items()}
-    average = WeightAverage(model, 0.75)
-    with torch.no_grad():
-        model[0].weight.add_(4.0)
-    model.train()(torch.rand(3, 2))  # moves the BatchNorm statistics and its step count
-    average.update(model)
-    now = model.state_dict()
-    torch.testing.assert_close(average.state["0.weight"], 0.75 * start["0.weight"] + 0.25 * now["0.weight"])
-    torch.testing.assert_close(average.state["1.running_mean"],
-                               0.75 * start["1.running_mean"] + 0.25 * now["1.running_mean"])
-    assert int(average.state["1.num_batches_tracked"]) == 1  # counted, not averaged
-    kept = average.network(model)
-    torch.testing.assert_close(kept.state_dict()["0.weight"], average.state["0.weight"])
-    assert kept is not model
-    with pytest.raises(ValueError, match="ema_decay"):
-        WeightAverage(model, 1.0)
-
-
-def test_averaged_training_keeps_the_average_and_the_last_step_apart() -> None:
-    data = toy_substances(4, seed=1)
-    config = replace(get_config("tiny"), epochs=2, iters_per_epoch=3, ema_decay=0.5)
-    result = train_substance_net(data, None, config)
-    kept, last = result.checkpoint["model"], result.checkpoint["train_model"]
-    assert any(not torch.equal(kept[k], last[k]) for k in kept if kept[k].is_floating_point())
-    assert result.checkpoint["config"]["ema_decay"] == 0.5
-    for name, tensor in result.model.state_dict().items():  # the network returned is the one kept
-        torch.testing.assert_close(tensor, kept[name])
-    plain = train_substance_net(data, None, replace(config, ema_decay=0.0))
-    assert "train_model" not in plain.checkpoint and "ema_decay" not in plain.checkpoint["config"]
 
 
 def test_predict_substances_returns_probabilities_at_image_size() -> None:

@@ -46,10 +46,6 @@ class SubstanceTrainConfig:
     # 0: the run's seed (`PHOTOSHAPE_SEED`), as every other draw of a run; another value fixes this
     # network's own, so a second training on the same bootstrap renders is one `--set`
     seed: int = 0
-    # > 0: the network kept is an exponential moving average of the weights (and BatchNorm statistics)
-    # over the training steps, this the decay per step, rather than the last step's weights
-    # (`substance_train.WeightAverage`); 0: the last step's
-    ema_decay: float = 0.0
     device: str = "cpu"
 
     @property
@@ -74,8 +70,6 @@ class SubstanceTrainConfig:
             data.pop("part_balance")
         if not self.read_size:
             data.pop("read_size")
-        if not self.ema_decay:
-            data.pop("ema_decay")
         return data
 
     @classmethod

@@ -11,10 +11,6 @@ the pixels); with ``part_balance`` p > 0 each part's pixels also weigh (part are
 renders' part maps (`part_weights`). AdamW with a cosine learning-rate
 schedule computed from the global iteration, so a resumed run follows the same schedule.
 
-With ``ema_decay`` the network kept (checkpoint ``model``, and the one each epoch's metrics read) is
-an exponential moving average of the weights over the steps; the last step's weights, which the
-optimiser continues from, are ``train_model``.
-
 Resumability: `train_substance_net` calls `on_epoch(checkpoint, metrics)` after every epoch; the
 checkpoint dict (model, optimiser, epoch, config, metrics, history) round-trips through
 `checkpoint_to_bytes` / `checkpoint_from_bytes`. Passing it back as `checkpoint=` continues with the
@@ -28,7 +24,6 @@ profiles can nest them without importing torch.
 
 from __future__ import annotations
 
-import copy
 import io
 import logging
 import math
@@ -257,38 +252,6 @@ class TrainResult:
     history: list[dict[str, Any]]
 
 
-class WeightAverage:
-    """An exponential moving average of a network's state (weights and BatchNorm statistics).
-
-    A network trained from scratch on a thousand renders ends wherever its last batches left it, and
-    two trainings read new shapes several points apart; the average over the last few hundred steps
-    is a point the optimiser's noise has stopped moving. Integer buffers (BatchNorm's step counts)
-    are copied, not averaged.
-    """
-
-    def __init__(self, model: torch.nn.Module, decay: float, state: dict[str, torch.Tensor] | None = None) -> None:
-        if not 0.0 < decay < 1.0:
-            raise ValueError(f"ema_decay must be in (0, 1), got {decay}")
-        self.decay = decay
-        source = state if state is not None else model.state_dict()
-        self.state = {k: v.detach().clone() for k, v in source.items()}
-
-    @torch.no_grad()
-    def update(self, model: torch.nn.Module) -> None:
-        for key, value in model.state_dict().items():
-            mine = self.state[key]
-            if mine.is_floating_point():
-                mine.mul_(self.decay).add_(value.detach(), alpha=1.0 - self.decay)
-            else:
-                mine.copy_(value)
-
-    def network(self, model: torch.nn.Module) -> torch.nn.Module:
-        """A copy of `model` holding the averaged state."""
-        averaged = copy.deepcopy(model)
-        averaged.load_state_dict(self.state)
-        return averaged
-
-
 def _lr_at(config: SubstanceTrainConfig, iteration: int, total: int) -> float:
     progress = min(1.0, iteration / max(1, total))
     floor = config.min_lr_fraction
@@ -320,16 +283,12 @@ def train_substance_net(
     start_epoch = 1
     history: list[dict[str, Any]] = []
     weights = class_weights(train) if config.class_balance else np.ones(NUM_CLASSES, np.float32)
-    average: WeightAverage | None = None
     if checkpoint is not None:
-        model.load_state_dict(checkpoint.get("train_model", checkpoint["model"]))
+        model.load_state_dict(checkpoint["model"])
         optimizer.load_state_dict(checkpoint["optimizer"])
         start_epoch = int(checkpoint["epoch"]) + 1
         history = list(checkpoint.get("history", []))
         weights = np.asarray(checkpoint.get("class_weights", weights), np.float32)
-    if config.ema_decay:
-        kept = checkpoint["model"] if checkpoint is not None and "train_model" in checkpoint else None
-        average = WeightAverage(model, config.ema_decay, kept)
     weight_t = torch.from_numpy(weights).to(device)
     balance = float(config.part_balance)
     if balance > 0 and train.parts is None:
@@ -365,14 +324,11 @@ def train_substance_net(
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
-            if average is not None:
-                average.update(model)
             losses.append(float(loss.detach()))
             seen += len(idx)
         seconds = time.perf_counter() - started
         eval_data = val if val is not None and len(val) else train
-        kept_model = average.network(model) if average is not None else model
-        metrics = evaluate(kept_model, eval_data, config.read_side, batch_size=config.batch_size)
+        metrics = evaluate(model, eval_data, config.read_side, batch_size=config.batch_size)
         metrics.update(
             {
                 "split": "val" if eval_data is val else "train",
@@ -391,7 +347,7 @@ def train_substance_net(
             metrics["mean_iou"], metrics["train_images_per_second"] or 0.0,
         )
         last = {
-            "model": {k: v.detach().cpu() for k, v in kept_model.state_dict().items()},
+            "model": {k: v.detach().cpu() for k, v in model.state_dict().items()},
             "optimizer": optimizer.state_dict(),
             "epoch": epoch,
             "config": config.to_dict(),
@@ -401,15 +357,11 @@ def train_substance_net(
             "metrics": metrics,
             "history": history,
         }
-        if average is not None:
-            last["train_model"] = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
         epochs_run.append(epoch)
         if on_epoch is not None:
             on_epoch(last, metrics)
     if last is None:
         raise ValueError("nothing to train: config.epochs is 0")
-    if average is not None:
-        model.load_state_dict(last["model"])  # the network returned is the one kept
     return TrainResult(model=model.eval(), checkpoint=last, epochs_run=epochs_run, history=history)
 
 
