@@ -131,7 +131,7 @@ def demo_measurement(demo_size: str, work: Path, size: int, methods: list[str]) 
     from photoshape_flow.demo.generate import generate_demo
     from photoshape_flow.demo.groundtruth import load_groundtruth
     from photoshape_flow.ingest.ingest import ingest_exemplars, ingest_shapes
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     settings = Settings(data_root=work / "data")
     migrate.upgrade(settings.resolved_database_url)
@@ -197,7 +197,7 @@ def main() -> None:
     parser.add_argument("--work", type=Path, help="scratch folder for --demo (default: a temporary one)")
     args = parser.parse_args()
 
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     renderer = Renderer()
     t = time.perf_counter()

@@ -63,7 +63,8 @@ def probe(pairs: int, settings_overrides: dict[str, float] | None = None, uv_spp
     from photoshape_flow.fit.scene import FitScene, FrameRenderer
     from photoshape_flow.fitting.refine import refine_settings
     from photoshape_flow.profiles import PROFILES
-    from photoshape_flow.render import Refinement, Renderer
+    from photoshape_flow.render import Refinement
+    from photoshape_flow.render.renderer import Renderer
     from photoshape_flow.render.specs import linear_to_srgb
 
     cfg = PROFILES["medium"].fit

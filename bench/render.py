@@ -145,7 +145,7 @@ def beauty_pair(renderer: Any, shape: Any, materials: list[Any], envmap: Any, ca
 
 # -- cold start (child process with an empty kernel cache) -----------------------------------
 def cold_probe() -> dict[str, float]:
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     with tempfile.TemporaryDirectory() as folder:
         shape, materials, envmap, cameras = make_inputs(Path(folder))
@@ -192,7 +192,7 @@ def main() -> None:
         sys.stdout.write(json.dumps(cold_probe()) + "\n")
         return
 
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     cold = run_cold()
     renderer = Renderer()

@@ -265,6 +265,36 @@ def test_no_function_local_package_import_outside_cli() -> None:
         + "\n".join(f"  {_short(a)}:{line} imports {_short(b)}" for a, b, line in offenders))
 
 
+# The only modules outside cli/ that import by name at run time, each for a reason an import statement
+# cannot serve: the stage registry is the composition root and must not load its stages (torch) to be
+# read; the backbone module loads the installed weights package the profile names (not ours); the
+# deployments resolve the entrypoints `prefect.yaml` declares as text (Prefect's own form).
+IMPORTS_BY_NAME = {f"{PACKAGE}.stages.registry", f"{PACKAGE}.classify.backbone", f"{PACKAGE}.flows.deployments"}
+
+
+def _imports_by_name(tree: ast.AST) -> list[int]:
+    """Lines that call `importlib.import_module` or `__import__` (an edge no import statement shows)."""
+    return sorted(node.lineno for node in ast.walk(tree) if isinstance(node, ast.Call)
+                  and (getattr(node.func, "attr", None) == "import_module"
+                       or getattr(node.func, "id", None) in ("import_module", "__import__")))
+
+
+def test_the_scan_finds_imports_by_name() -> None:
+    tree = ast.parse("import importlib\ndef f(name):\n    return importlib.import_module(name)\n"
+                     "g = __import__('x')\n")
+    assert _imports_by_name(tree) == [3, 4]
+
+
+def test_imports_by_name_only_where_they_are_the_design() -> None:
+    cli = f"{PACKAGE}.cli"
+    offenders = sorted(
+        f"{_short(name)}:{line}" for name, path in modules().items()
+        if name not in IMPORTS_BY_NAME and name != cli and not name.startswith(cli + ".")
+        for line in _imports_by_name(ast.parse(path.read_text(), str(path))))
+    assert not offenders, ("imports by name hide an edge from the graph above (import the module, or pass "
+                           "the object itself): " + ", ".join(offenders))
+
+
 def _imports_at_top(path: Path, heavy: tuple[str, ...]) -> bool:
     """Whether a module imports one of `heavy` at its top (outside functions and `if TYPE_CHECKING:`)."""
 

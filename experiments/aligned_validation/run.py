@@ -173,7 +173,7 @@ def main() -> None:
     from photoshape_flow.align.viewpoints import cameras_from_rows
     from photoshape_flow.imaging.squares import square_box
     from photoshape_flow.profiles import PROFILES
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     settings = get_settings()
     store = BlobStore(settings.blob_root)

@@ -169,7 +169,7 @@ def test_exemplar_at() -> None:
 @pytest.mark.render
 def test_render_coarse_part_map_matches_a_direct_render() -> None:
     pytest.importorskip("mitsuba")
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     renderer = Renderer()
     shape = two_box_shape()

@@ -93,7 +93,7 @@ def test_degradation_keeps_white_background_and_object() -> None:
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory: pytest.TempPathFactory):
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     renderer = Renderer()
     root = tmp_path_factory.mktemp("demo") / "tiny"

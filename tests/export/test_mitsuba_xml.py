@@ -14,7 +14,7 @@ pytestmark = pytest.mark.render
 
 def test_xml_reload_renders_the_same_image(tmp_path, tiny_shape, tiny_materials):
     """The XML, reloaded and rendered with Mitsuba's defaults, gives the Renderer's image at the same seed."""
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
     from photoshape_flow.render.runtime import ensure_mitsuba
 
     mi = ensure_mitsuba()
@@ -49,7 +49,7 @@ def test_xml_reload_renders_the_refined_look(tmp_path, tiny_shape, tiny_material
     and that look differs from the unrefined material's."""
     from dataclasses import replace
 
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
     from photoshape_flow.render.runtime import ensure_mitsuba
     from photoshape_flow.render.specs import Refinement
 

@@ -107,7 +107,7 @@ def test_orientation_turns_twice_as_fast_as_stripes() -> None:
 @pytest.fixture(scope="module")
 def boxes(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
     pytest.importorskip("mitsuba")
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     folder = tmp_path_factory.mktemp("refine")
     envmap = _studio(folder / "warm-left.exr", 4, (9.0, 6.0, 3.0))

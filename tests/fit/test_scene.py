@@ -63,7 +63,7 @@ def _studio(path: Path, column: int, colour: tuple[float, float, float]) -> Envm
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
     pytest.importorskip("mitsuba")
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     folder = tmp_path_factory.mktemp("studios")
     studios = {10: _studio(folder / "cool-right.exr", 20, (3.0, 5.0, 9.0)),

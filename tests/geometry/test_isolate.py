@@ -28,3 +28,21 @@ def test_the_memory_budget_stops_a_bomb_in_the_child_only() -> None:
         with pytest.raises(MemoryError):
             worker.call(allocate, 3 * 1024**3)  # would pass without the budget (the test host has the memory)
         assert worker.call(add, 1, 2) == 3
+
+
+def test_a_function_the_child_cannot_import_is_that_calls_error_only() -> None:
+    """The child imports a function's module as it unpickles the call: a module only the parent has
+    (here one built in memory) comes back as the import error, and the child serves the next call."""
+    import sys
+    import types
+
+    module = types.ModuleType("photoshape_parent_only")
+    exec("def double(x):\n    return 2 * x\n", module.__dict__)
+    sys.modules[module.__name__] = module
+    try:
+        with IsolatedWorker(timeout_s=60) as worker:
+            with pytest.raises(ModuleNotFoundError, match="photoshape_parent_only"):
+                worker.call(module.double, 2)
+            assert worker.call(add, 2, 2) == 4
+    finally:
+        del sys.modules[module.__name__]

@@ -198,7 +198,7 @@ def test_truth_in_stored_frame_maps_names_and_crop() -> None:
 @pytest.mark.render
 def test_run_with_the_mitsuba_renderer(db_url: str, store) -> None:  # type: ignore[no-untyped-def]
     pytest.importorskip("mitsuba")
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     seeded = seed_db(db_url, store, PainterRenderer())
     summary = run_fine_alignment(pair_ids=[seeded["pairs"]["chair"]], settings=get_settings(),

@@ -31,7 +31,8 @@ def _add_alignments(url: str, store, col) -> int:  # type: ignore[no-untyped-def
     unobserved. Returns the part id of those legs.
     """
     from photoshape_flow.geometry.mesh import ShapeMesh
-    from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec, Renderer
+    from photoshape_flow.render import Camera, EnvmapSpec, MaterialSpec
+    from photoshape_flow.render.renderer import Renderer
 
     renderer = Renderer(resolve=store.resolve)
     hidden_part = -1

@@ -11,7 +11,7 @@ import pytest
 @pytest.fixture(scope="session")
 def renderer():  # type: ignore[no-untyped-def]
     pytest.importorskip("mitsuba")
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     return Renderer()
 

@@ -106,7 +106,7 @@ def test_builtin_texture_keeps_mesh_uvs_upright(renderer, constant_envmap, tmp_p
     quad = plane().parts[0]
     quad.builtin_material = {"albedo": [1, 1, 1], "roughness": 1.0, "texture": "ab.png"}
     shape = ShapeMesh(parts=[quad])
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     local = Renderer(resolve=lambda ref: tmp_path / ref)
     result = local.beauty(shape, None, FILL, constant_envmap(1.0), size=32, spp=4)
@@ -191,7 +191,7 @@ def test_cached_scene_update_equals_fresh_build(renderer, tmp_path: Path) -> Non
     """A render right after another (other materials, camera, envmap scale and rotation, UV jitter)
     equals the same render by another Renderer: nothing of the previous render carries over.
     (tests/render/test_pool.py compares the persistent scene with a freshly loaded one.)"""
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     sky = np.zeros((8, 16, 3), np.float32)
     sky[:3] = [2.0, 1.5, 1.0]

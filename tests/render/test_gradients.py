@@ -43,7 +43,7 @@ def test_gradient_scene_differentiates_the_tint_and_restores_the_pool() -> None:
     import drjit as dr
 
     from photoshape_flow.fit.scene import FrameRenderer
-    from photoshape_flow.render import Renderer
+    from photoshape_flow.render.renderer import Renderer
 
     renderer = Renderer()
     mesh = normalise_to_unit_cube([box_part(1, (0.0, 0.0, 0.0), (0.3, 0.3, 0.3))])

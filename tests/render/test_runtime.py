@@ -28,7 +28,7 @@ def test_renderer_runs_on_a_recent_llvm(renderer) -> None:  # type: ignore[no-un
 
 @pytest.mark.render
 def test_check_llvm_renders_in_a_subprocess() -> None:
-    from photoshape_flow.render import check_llvm
+    from photoshape_flow.render.selftest import check_llvm
 
     ok, message = check_llvm()
     assert ok, message

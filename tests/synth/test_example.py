@@ -57,7 +57,8 @@ def test_saturated_fraction_counts_foreground_only() -> None:
 
 @pytest.mark.render
 def test_render_training_example_labels_agree_and_saturation_rejects(tmp_path: Path) -> None:
-    from photoshape_flow.render import EnvmapSpec, MaterialSpec, Renderer
+    from photoshape_flow.render import EnvmapSpec, MaterialSpec
+    from photoshape_flow.render.renderer import Renderer
     from photoshape_flow.store import BlobStore
 
     store = BlobStore(tmp_path / "blobs")

@@ -80,7 +80,7 @@ def generate_demo(
 ) -> DemoManifest:
     """Generate (or bring up to date) the demo collection of `size` in `out_dir`; see module docstring.
 
-    `renderer`: a `photoshape_flow.render.Renderer` to reuse (one is created when exemplars need
+    `renderer`: a `photoshape_flow.render.renderer.Renderer` to reuse (one is created when exemplars need
     rendering and none is given). `preset`: custom counts instead of SIZES[size] (tests, experiments).
     `source`: the ingest source the ground truth names the exemplars and shapes by (default
     ``demo-<size>``, what `photoshape demo` ingests them as).

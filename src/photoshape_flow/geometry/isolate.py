@@ -2,8 +2,9 @@
 
 Some native importers segfault on real files (two Kator Legaz Sweet Home 3D chairs crash Blender's),
 and a segfault cannot be caught in-process. `IsolatedWorker` keeps one spawned child (spawn, not
-fork, so it is safe in threaded hosts such as Prefect workers), sends it a function by module and
-name plus picklable arguments, and waits with a timeout. A dead child raises `WorkerCrashedError`,
+fork, so it is safe in threaded hosts such as Prefect workers), sends it a module-level function
+and picklable arguments (pickle names the function, the child imports its module as it unpickles),
+and waits with a timeout. A dead child raises `WorkerCrashedError`,
 an overrun kills it and raises `WorkerTimeoutError`; either way the next call starts a fresh child.
 Exceptions raised by the function come back as themselves (BadShapeError stays a rejection).
 
@@ -15,7 +16,6 @@ machine; either way it costs one item.
 
 from __future__ import annotations
 
-import importlib
 import multiprocessing as mp
 import signal
 import time
@@ -44,11 +44,13 @@ def _child_main(conn: Any, memory_bytes: int | None = None) -> None:
             message = conn.recv()
         except (EOFError, OSError):
             return
+        except Exception as exc:  # the function's module failed to import here: one item's error
+            conn.send(("error", exc, traceback.format_exc(limit=5)))
+            continue
         if message is None:
             return
-        module_name, func_name, args, kwargs = message
+        func, args, kwargs = message
         try:
-            func = getattr(importlib.import_module(module_name), func_name)
             result = ("ok", func(*args, **kwargs))
         except BaseException as exc:  # everything goes back to the parent
             result = ("error", exc, traceback.format_exc(limit=5))
@@ -113,7 +115,7 @@ class IsolatedWorker:
             self._start()
         limit = self.timeout_s if timeout_s is None else timeout_s
         try:
-            self._conn.send((func.__module__, func.__qualname__, args, kwargs))
+            self._conn.send((func, args, kwargs))
         except (OSError, BrokenPipeError) as exc:
             self._proc.join(5)
             code = self._proc.exitcode
