@@ -30,7 +30,7 @@ def test_the_memory_budget_stops_a_bomb_in_the_child_only() -> None:
         assert worker.call(add, 1, 2) == 3
 
 
-def test_a_function_the_child_cannot_import_is_that_calls_error_only() -> None:
+def test_a_function_the_child_cannot_import_fails_that_call_only() -> None:
     """The child imports a function's module as it unpickles the call: a module only the parent has
     (here one built in memory) comes back as the import error, and the child serves the next call."""
     import sys
